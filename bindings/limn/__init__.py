@@ -1,0 +1,18 @@
+"""limn: a differentiable renderer for inverse shape optimisation.
+
+    import limn
+    scene = limn.load("scenes/default.json")
+    image = scene.render(spp=64)            # (H, W, 3) float32, linear RGB
+    limn.write_image("out.exr", image)
+
+Scene descriptions follow Mitsuba 3's dictionary conventions; see docs/scene-format.md.
+"""
+from __future__ import annotations
+
+from . import _core
+from ._core import RenderCancelled
+from .scene import Parameters, Scene, load, load_dict
+from .images import read_image, write_image, write_ply
+
+__version__ = "0.1.0"
+__all__ = ["Scene", "Parameters", "load", "load_dict", "read_image", "write_image", "write_ply", "RenderCancelled"]

@@ -1,0 +1,63 @@
+"""Command line: ``python3 -m limn render scene.json -o out.exr --spp N``."""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+from .images import write_image
+from .progress import ProgressBar
+from .scene import load
+from . import RenderCancelled
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    t0 = time.perf_counter()
+    scene = load(args.scene)
+    t_load = time.perf_counter() - t0
+    bar = ProgressBar(f"rendering {os.path.basename(args.scene)}")
+    try:
+        image = scene.render(spp=args.spp, seed=args.seed, threads=args.threads, progress=bar)
+    finally:
+        bar.close()
+    stats = scene.last_stats
+    outputs = [args.output]
+    if args.output.lower().endswith((".exr", ".hdr")) and not args.no_preview:
+        outputs.append(os.path.splitext(args.output)[0] + ".png")
+    for path in outputs:
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        write_image(path, image)
+    seconds = stats["seconds"]
+    print(f"scene     {args.scene} ({scene.width}x{scene.height}, {stats['spp']} spp, loaded in {t_load:.2f} s)")
+    print(f"render    {seconds:.2f} s, {stats['samples'] / seconds / 1e6:.2f} M samples/s, "
+          f"{stats['rays'] / seconds / 1e6:.2f} M rays/s, {stats['invalid_samples']} invalid samples")
+    for path in outputs:
+        print(f"wrote     {os.path.abspath(path)}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python3 -m limn", description="limn differentiable renderer")
+    sub = parser.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("render", help="render a scene description to an image")
+    r.add_argument("scene", help="scene description (.json)")
+    r.add_argument("-o", "--output", default="out.exr", help="output image (.exr, .hdr, .png, ...); default out.exr")
+    r.add_argument("--spp", type=int, default=None, help="samples per pixel (default: the scene's sampler)")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--threads", type=int, default=0, help="worker threads (0: all cores)")
+    r.add_argument("--no-preview", action="store_true", help="do not write a .png next to an .exr/.hdr output")
+    r.set_defaults(func=cmd_render)
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, RenderCancelled):
+        print("cancelled", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

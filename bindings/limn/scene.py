@@ -1,0 +1,139 @@
+"""The Scene object: loading, rendering and editable parameters."""
+from __future__ import annotations
+
+import collections.abc
+import json
+import os
+import warnings
+from typing import Callable, Iterator
+
+import numpy as np
+
+from . import _core
+
+
+class Parameters(collections.abc.MutableMapping):
+    """Editable scene parameters by name, e.g. ``"bunny.vertex_positions"`` (N x 3),
+    ``"ball.center"`` (3,), ``"ball.radius"`` (a 0-d array), ``"floor.reflectance"`` (3,) or
+    (H, W, 3) for a bitmap, ``"lamp.radiance"`` (3,).
+
+    ``params[name]`` is a writable float32 view into the scene's memory; assigning copies values in
+    (the shape must match). Call ``Scene.update()`` after edits (``render()`` does it for you)."""
+
+    def __init__(self, native: _core.Scene):
+        self._native = native
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self._native.parameter(name)
+
+    def __setitem__(self, name: str, value) -> None:
+        view = self._native.parameter(name)
+        array = np.asarray(value, dtype=np.float32)
+        if array.shape != view.shape:
+            raise ValueError(f"parameter '{name}': expected shape {view.shape}, got {array.shape}")
+        view[...] = array
+
+    def __delitem__(self, name: str) -> None:
+        raise TypeError("scene parameters cannot be removed")
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._native.parameter_names())
+
+    def __len__(self) -> int:
+        return len(self._native.parameter_names())
+
+    def __repr__(self) -> str:
+        rows = [f"  {name}: {tuple(self[name].shape)}" for name in self]
+        return "Parameters(\n" + "\n".join(rows) + "\n)"
+
+
+class Scene:
+    """A loaded scene. Create with :func:`load` or :func:`load_dict`."""
+
+    def __init__(self, native: _core.Scene):
+        self._native = native
+        self.params = Parameters(native)
+        self.last_stats: dict = {}
+        for message in native.warnings:
+            warnings.warn(message, stacklevel=3)
+
+    @property
+    def width(self) -> int:
+        return self._native.width
+
+    @property
+    def height(self) -> int:
+        return self._native.height
+
+    @property
+    def spp(self) -> int:
+        """Samples per pixel from the scene's sampler (used when render() gets none)."""
+        return self._native.spp
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self._native.warnings)
+
+    def update(self) -> list[str]:
+        """Apply edits made through ``params``: validates them (ValueError names the parameter and
+        the bad value; the old values are restored), refits moved geometry. Returns the changed names."""
+        return self._native.update()
+
+    def render(self, spp: int | None = None, seed: int = 0, threads: int = 0,
+               progress: Callable[[float], bool | None] | None = None) -> np.ndarray:
+        """Render the scene; returns a (H, W, 3) float32 array of linear RGB radiance.
+
+        The same ``seed`` gives the same image for any number of ``threads`` (0 = all cores).
+        ``progress(fraction)`` is called from time to time; returning False cancels with
+        :class:`limn.RenderCancelled`. Statistics of the call are kept in ``last_stats``."""
+        if spp is not None and spp <= 0:
+            raise ValueError(f"spp must be > 0 (got {spp})")
+        if seed < 0:
+            raise ValueError(f"seed must be >= 0 (got {seed})")
+        self.update()
+        image, self.last_stats = self._native.render(spp or 0, seed, threads, progress)
+        if self.last_stats["invalid_samples"]:
+            warnings.warn(f"{self._native.source}: {self.last_stats['invalid_samples']} invalid (NaN/Inf) samples were dropped",
+                          stacklevel=2)
+        return image
+
+    def __repr__(self) -> str:
+        return (f"Scene('{self._native.source}', {self.width}x{self.height}, spp={self.spp}, "
+                f"shapes={self._native.shape_ids}, integrator={self._native.integrator})")
+
+
+def load(path: str | os.PathLike) -> Scene:
+    """Load a scene description (JSON, Mitsuba-3 dictionary conventions) from a file."""
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise ValueError(f"scene file '{path}' not found")
+    return Scene(_core.load_file(path))
+
+
+def load_dict(description: dict, base_dir: str | os.PathLike | None = None, source: str = "<dict>") -> Scene:
+    """Load a scene from a dictionary in the same format as the JSON files. Values may be numpy
+    arrays (e.g. ``vertex_positions`` and ``faces`` of a ``mesh`` shape, a 4x4 ``to_world``).
+    Relative file names are resolved against ``base_dir`` (default: the working directory)."""
+    if not isinstance(description, dict):
+        raise ValueError(f"load_dict expects a dict, got {type(description).__name__}")
+    arrays: list[np.ndarray] = []
+
+    def convert(value, where: str):
+        if isinstance(value, np.ndarray):
+            arrays.append(np.ascontiguousarray(value))
+            return {"__limn_array__": len(arrays) - 1}
+        if isinstance(value, dict):
+            return {str(k): convert(v, f"{where}.{k}") for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [convert(v, where) for v in value]
+        if isinstance(value, np.generic):
+            return convert(value.item(), where)
+        if isinstance(value, float) and not np.isfinite(value):
+            raise ValueError(f"{source}: '{where}' is not finite ({value})")
+        if value is None or isinstance(value, (bool, int, float, str)):
+            return value
+        raise ValueError(f"{source}: '{where}' has a value of unsupported type {type(value).__name__}")
+
+    text = json.dumps(convert(description, "scene"), allow_nan=False)
+    base = os.fspath(base_dir) if base_dir is not None else os.getcwd()
+    return Scene(_core.load_json(text, source, base, arrays))

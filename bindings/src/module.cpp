@@ -1,0 +1,165 @@
+// pybind11 module limn._core: converts between numpy/Python and the C++ core, nothing more.
+// The Python package (bindings/limn) builds the user-facing API on top of it.
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <exception>
+#include "core/geometry/accel.h"
+#include "core/io/image_io.h"
+#include "core/io/mesh_io.h"
+#include "core/io/scene_loader.h"
+#include "core/render/render.h"
+
+namespace py = pybind11;
+using namespace limn;
+
+namespace {
+
+using SceneHandle = std::shared_ptr<Scene>;
+
+ArrayData to_array_data(const py::array& a) {
+  ArrayData out;
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) out.shape.push_back(size_t(a.shape(i)));
+  out.integer = py::dtype::of<int64_t>().kind() == a.dtype().kind() || a.dtype().kind() == 'u';
+  auto as_double = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(a);
+  if (!as_double) throw std::invalid_argument("cannot convert an array of dtype " + std::string(py::str(a.dtype())) + " to numbers");
+  out.values.assign(as_double.data(), as_double.data() + as_double.size());
+  return out;
+}
+
+py::array_t<float> image_to_numpy(Image img) {
+  auto* owned = new std::vector<float>(std::move(img.rgb));
+  py::capsule free_when_done(owned, [](void* p) { delete static_cast<std::vector<float>*>(p); });
+  return py::array_t<float>({py::ssize_t(img.height), py::ssize_t(img.width), py::ssize_t(3)}, owned->data(), free_when_done);
+}
+
+Image numpy_to_image(const py::array& a0) {
+  auto a = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(a0);
+  if (!a || !(a.ndim() == 3 && a.shape(2) == 3) && a.ndim() != 2)
+    throw std::invalid_argument("image must be an array of shape (H, W, 3) or (H, W)");
+  Image img{int(a.shape(1)), int(a.shape(0)), {}};
+  img.rgb.resize(size_t(img.width) * img.height * 3);
+  const float* src = a.data();
+  if (a.ndim() == 3) std::copy(src, src + img.rgb.size(), img.rgb.begin());
+  else
+    for (size_t i = 0; i < size_t(img.width) * img.height; ++i) img.rgb[3 * i] = img.rgb[3 * i + 1] = img.rgb[3 * i + 2] = src[i];
+  return img;
+}
+
+// Render with the GIL released. The progress callback (if any) runs with the GIL re-acquired;
+// it also gives Ctrl-C a chance: a pending signal cancels the render and is re-raised here.
+py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int threads, py::object progress) {
+  RenderOptions opt;
+  opt.spp = spp;
+  opt.seed = seed;
+  opt.threads = threads;
+  std::exception_ptr callback_error;
+  opt.progress = [&](float fraction) -> bool {
+    py::gil_scoped_acquire gil;
+    try {
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+      if (progress.is_none()) return true;
+      py::object r = progress(fraction);
+      return r.is_none() || r.cast<bool>();
+    } catch (...) {
+      if (!callback_error) callback_error = std::current_exception();
+      return false;
+    }
+  };
+  RenderStats stats;
+  Image img;
+  try {
+    py::gil_scoped_release release;
+    img = render(*scene, opt, &stats);
+  } catch (const RenderCancelled&) {
+    if (callback_error) std::rethrow_exception(callback_error);
+    throw;
+  }
+  py::dict s;
+  s["seconds"] = stats.seconds;
+  s["samples"] = stats.samples;
+  s["rays"] = stats.rays;
+  s["invalid_samples"] = stats.invalid_samples;
+  s["spp"] = spp > 0 ? spp : scene->spp;
+  return py::make_tuple(image_to_numpy(std::move(img)), s);
+}
+
+py::array parameter_view(const SceneHandle& scene, const std::string& name) {
+  const Parameter* p = scene->find_parameter(name);
+  if (!p) throw py::key_error("unknown parameter '" + name + "'");
+  std::vector<py::ssize_t> shape(p->shape.begin(), p->shape.end());
+  // The view keeps the scene alive through its base object.
+  return py::array_t<float>(shape, p->data, py::cast(scene));
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "limn core (C++): scene loading, rendering, image and mesh I/O";
+  py::register_exception<RenderCancelled>(m, "RenderCancelled");
+
+  py::class_<Scene, SceneHandle>(m, "Scene")
+      .def("render", &render_scene, py::arg("spp") = 0, py::arg("seed") = 0, py::arg("threads") = 0, py::arg("progress") = py::none(),
+           "Render; returns (image (H, W, 3) float32, stats dict). Releases the GIL.")
+      .def("parameter_names", [](const SceneHandle& s) {
+        std::vector<std::string> names;
+        for (const Parameter& p : s->parameters()) names.push_back(p.name);
+        return names;
+      })
+      .def("parameter", &parameter_view, "Writable float32 view of a parameter")
+      .def("update", &Scene::update, "Apply parameter edits; returns the names that changed")
+      .def_property_readonly("width", [](const Scene& s) { return s.camera.width; })
+      .def_property_readonly("height", [](const Scene& s) { return s.camera.height; })
+      .def_property_readonly("spp", [](const Scene& s) { return s.spp; })
+      .def_property_readonly("source", [](const Scene& s) { return s.source; })
+      .def_property_readonly("warnings", [](const Scene& s) { return s.warnings; })
+      .def_property_readonly("shape_ids", [](const Scene& s) {
+        std::vector<std::string> ids;
+        for (const Shape& sh : s.shapes) ids.push_back(sh.id);
+        return ids;
+      })
+      .def_property_readonly("integrator", [](const Scene& s) {
+        py::dict d;
+        d["type"] = s.integrator.type;
+        d["max_depth"] = s.integrator.max_depth;
+        d["rr_depth"] = s.integrator.rr_depth;
+        return d;
+      })
+      .def_property_readonly("triangle_count", [](const Scene& s) {
+        size_t n = 0;
+        for (const Shape& sh : s.shapes)
+          if (sh.is_mesh()) n += sh.mesh().triangle_count();
+        return n;
+      });
+
+  m.def("load_file", [](const std::string& path) { return SceneHandle(load_scene_file(path)); }, py::arg("path"),
+        py::call_guard<py::gil_scoped_release>());
+  m.def("load_json", [](const std::string& text, const std::string& source, const std::string& base_dir, const std::vector<py::array>& arrays) {
+        std::vector<ArrayData> data;
+        for (const py::array& a : arrays) data.push_back(to_array_data(a));
+        nlohmann::json j;
+        try {
+          j = nlohmann::json::parse(text);
+        } catch (const nlohmann::json::parse_error& e) {
+          throw std::invalid_argument(source + ": malformed description: " + e.what());
+        }
+        py::gil_scoped_release release;
+        return SceneHandle(load_scene_dict(j, source, base_dir, data));
+      }, py::arg("text"), py::arg("source"), py::arg("base_dir"), py::arg("arrays"));
+
+  m.def("read_image", [](const std::string& path, bool raw) {
+        Bitmap b = read_image(path, raw);
+        return image_to_numpy(Image{b.width, b.height, std::move(b.rgb)});
+      }, py::arg("path"), py::arg("raw") = false);
+  m.def("write_image", [](const std::string& path, const py::array& img) { write_image(path, numpy_to_image(img)); },
+        py::arg("path"), py::arg("image"));
+  m.def("write_ply", [](const std::string& path, py::array_t<float, py::array::c_style | py::array::forcecast> v,
+                        py::array_t<uint32_t, py::array::c_style | py::array::forcecast> f) {
+        if (v.ndim() != 2 || v.shape(1) != 3) throw std::invalid_argument("write_ply: positions must have shape (N, 3)");
+        if (f.ndim() != 2 || f.shape(1) != 3) throw std::invalid_argument("write_ply: faces must have shape (F, 3)");
+        write_ply(path, std::vector<float>(v.data(), v.data() + v.size()), std::vector<uint32_t>(f.data(), f.data() + f.size()));
+      }, py::arg("path"), py::arg("positions"), py::arg("faces"));
+  m.def("embree_error_count", &EmbreeDevice::error_count);
+}

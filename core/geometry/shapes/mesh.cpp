@@ -1,0 +1,100 @@
+#include "core/geometry/shapes/mesh.h"
+
+#include <cstring>
+#include <unordered_map>
+#include "core/math/warp.h"
+
+namespace limn {
+
+void Mesh::update_derived() {
+  const size_t nt = triangle_count();
+  triangle_areas.assign(nt, 0.0f);
+  vertex_normals.assign(face_normals ? 0 : vertex_count(), Vec3(0.0f));
+  double total = 0.0;
+  for (size_t f = 0; f < nt; ++f) {
+    const uint32_t i0 = indices[3 * f], i1 = indices[3 * f + 1], i2 = indices[3 * f + 2];
+    const Vec3 c = glm::cross(vertex(i1) - vertex(i0), vertex(i2) - vertex(i0));
+    const float area = 0.5f * glm::length(c);
+    triangle_areas[f] = std::isfinite(area) ? area : 0.0f;
+    total += triangle_areas[f];
+    // Area-weighted normals: the unnormalised cross product is 2 * area * n.
+    if (!face_normals && std::isfinite(area))
+      for (uint32_t i : {i0, i1, i2}) vertex_normals[i] += c;
+  }
+  for (auto& n : vertex_normals) {
+    const float len = glm::length(n);
+    n = len > 0.0f ? n / len : Vec3(0.0f);
+  }
+  total_area = float(total);
+  area_distribution = nt > 0 ? Distribution1D(triangle_areas) : Distribution1D();
+}
+
+void Mesh::fill_interaction(int prim, float b1, float b2, SurfaceInteraction& si) const {
+  const uint32_t i0 = indices[3 * prim], i1 = indices[3 * prim + 1], i2 = indices[3 * prim + 2];
+  const Vec3 p0 = vertex(i0), p1 = vertex(i1), p2 = vertex(i2);
+  const float b0 = 1.0f - b1 - b2;
+  si.p = b0 * p0 + b1 * p1 + b2 * p2;
+  // Error of the barycentric sum (pbrt-v4, section 6.8.6): gamma(7) * sum |b_i p_i|.
+  si.p_error = gamma_bound(7) * (glm::abs(b0 * p0) + glm::abs(b1 * p1) + glm::abs(b2 * p2));
+  const Vec3 c = glm::cross(p1 - p0, p2 - p0);
+  const float len = glm::length(c);
+  si.ng = len > 0.0f ? c / len : Vec3(0, 0, 1);
+  si.ns = si.ng;
+  if (!face_normals) {
+    const Vec3 n = b0 * vertex_normals[i0] + b1 * vertex_normals[i1] + b2 * vertex_normals[i2];
+    const float ln = glm::length(n);
+    if (ln > 0.0f) si.ns = glm::dot(n, si.ng) >= 0.0f ? n / ln : -n / ln;
+  }
+  if (!corner_uvs.empty()) {
+    const float* t = &corner_uvs[6 * size_t(prim)];
+    si.uv = b0 * Vec2(t[0], t[1]) + b1 * Vec2(t[2], t[3]) + b2 * Vec2(t[4], t[5]);
+  } else {
+    si.uv = Vec2(b1, b2);
+  }
+  si.bary = Vec2(b1, b2);
+  si.prim = prim;
+  si.frame = Frame(si.ns);
+}
+
+PositionSample Mesh::sample_position(const Vec2& u, float u_tri) const {
+  float pdf_tri = 0.0f;
+  size_t prim = 0;
+  area_distribution.sample_continuous(u_tri, &prim, &pdf_tri);
+  const Vec2 b = warp::square_to_uniform_triangle(u);
+  SurfaceInteraction si;
+  fill_interaction(int(prim), b.x, b.y, si);
+  // P(triangle) = area_f / total, then uniform on it: pdf_area = 1 / total_area.
+  return PositionSample{si.p, si.ng, si.uv, total_area > 0.0f ? 1.0f / total_area : 0.0f};
+}
+
+std::vector<uint32_t> weld_by_position(const std::vector<float>& positions, const std::vector<uint32_t>& indices,
+                                       std::vector<float>& welded) {
+  struct Key {
+    uint32_t x, y, z;
+    bool operator==(const Key&) const = default;
+  };
+  struct KeyHash {
+    size_t operator()(const Key& k) const { return (size_t(k.x) * 73856093u) ^ (size_t(k.y) * 19349663u) ^ (size_t(k.z) * 83492791u); }
+  };
+  auto bits = [](float f) {
+    if (f == 0.0f) f = 0.0f;  // -0 and +0 are the same position
+    uint32_t u;
+    std::memcpy(&u, &f, 4);
+    return u;
+  };
+  std::unordered_map<Key, uint32_t, KeyHash> map;
+  map.reserve(positions.size() / 3);
+  std::vector<uint32_t> remap(positions.size() / 3);
+  welded.clear();
+  for (size_t v = 0; v < positions.size() / 3; ++v) {
+    const Key k{bits(positions[3 * v]), bits(positions[3 * v + 1]), bits(positions[3 * v + 2])};
+    auto [it, inserted] = map.try_emplace(k, uint32_t(welded.size() / 3));
+    if (inserted) welded.insert(welded.end(), {positions[3 * v], positions[3 * v + 1], positions[3 * v + 2]});
+    remap[v] = it->second;
+  }
+  std::vector<uint32_t> out(indices.size());
+  for (size_t i = 0; i < indices.size(); ++i) out[i] = remap[indices[i]];
+  return out;
+}
+
+}  // namespace limn

@@ -1,0 +1,43 @@
+// Triangle mesh in world space. Vertices are welded by position, so edges shared by two triangles
+// are adjacent even across UV seams; texture coordinates are kept per triangle corner.
+#pragma once
+#include <string>
+#include <vector>
+#include "core/geometry/ray.h"
+#include "core/math/distribution.h"
+
+namespace limn {
+
+struct PositionSample {
+  Vec3 p, n;        // point and unit surface normal
+  Vec2 uv;
+  float pdf_area;   // density with respect to surface area
+};
+
+struct Mesh {
+  std::vector<float> positions;      // 3 floats per vertex, world space (differentiable later)
+  std::vector<uint32_t> indices;     // 3 per triangle
+  std::vector<float> corner_uvs;     // 6 floats per triangle (may be empty)
+  bool face_normals = false;         // true: flat shading; false: area-weighted vertex normals
+
+  // Derived state, recomputed by update_derived() after positions change.
+  std::vector<Vec3> vertex_normals;
+  std::vector<float> triangle_areas;
+  Distribution1D area_distribution;  // triangles by area
+  float total_area = 0.0f;
+
+  size_t vertex_count() const { return positions.size() / 3; }
+  size_t triangle_count() const { return indices.size() / 3; }
+  Vec3 vertex(uint32_t i) const { return Vec3(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]); }
+
+  void update_derived();
+  // Surface record at barycentrics (b1, b2) of triangle `prim`.
+  void fill_interaction(int prim, float b1, float b2, SurfaceInteraction& si) const;
+  PositionSample sample_position(const Vec2& u, float u_tri) const;
+};
+
+// Welds vertices with bitwise-equal positions; returns the new index buffer and fills `welded`.
+std::vector<uint32_t> weld_by_position(const std::vector<float>& positions, const std::vector<uint32_t>& indices,
+                                       std::vector<float>& welded);
+
+}  // namespace limn

@@ -1,0 +1,774 @@
+#include "core/io/scene_loader.h"
+
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <map>
+#include <set>
+#include <sstream>
+#include "core/io/image_io.h"
+#include "core/io/mesh_io.h"
+
+namespace limn {
+namespace {
+
+using json = nlohmann::json;
+
+enum class Category { Scene, Sensor, Film, Sampler, Filter, Integrator, Shape, Bsdf, Emitter, Texture, Ref };
+
+const std::map<std::string, Category>& known_types() {
+  static const std::map<std::string, Category> table = {
+      {"scene", Category::Scene},          {"perspective", Category::Sensor},    {"hdrfilm", Category::Film},
+      {"independent", Category::Sampler},  {"stratified", Category::Sampler},    {"multijitter", Category::Sampler},
+      {"box", Category::Filter},           {"gaussian", Category::Filter},       {"tent", Category::Filter},
+      {"path", Category::Integrator},      {"direct", Category::Integrator},     {"obj", Category::Shape},
+      {"ply", Category::Shape},            {"mesh", Category::Shape},            {"sphere", Category::Shape},
+      {"rectangle", Category::Shape},      {"cube", Category::Shape},            {"diffuse", Category::Bsdf},
+      {"conductor", Category::Bsdf},       {"roughconductor", Category::Bsdf},   {"dielectric", Category::Bsdf},
+      {"roughdielectric", Category::Bsdf}, {"twosided", Category::Bsdf},         {"area", Category::Emitter},
+      {"point", Category::Emitter},        {"directional", Category::Emitter},   {"constant", Category::Emitter},
+      {"envmap", Category::Emitter},       {"bitmap", Category::Texture},        {"ref", Category::Ref},
+      {"rgb", Category::Texture}};
+  return table;
+}
+
+std::string known_of(Category c) {
+  std::string out;
+  for (const auto& [name, cat] : known_types())
+    if (cat == c && name != "rgb") out += (out.empty() ? "" : ", ") + name;
+  return out;
+}
+
+struct Context {
+  std::string source;
+  std::filesystem::path base_dir;
+  const std::vector<ArrayData>* arrays = nullptr;
+  Scene* scene = nullptr;
+  std::map<std::string, int> named_bsdfs;  // top-level bsdf id -> index
+  std::set<std::string> ids;
+};
+
+// One object of the description: typed accessors that validate values, record which keys were
+// read (the rest are reported as unused) and phrase errors as "<source>: <object>: <problem>".
+class Props {
+ public:
+  Props(Context& ctx, const json& j, std::string what) : m_ctx(ctx), m_j(j), m_what(std::move(what)) {
+    m_used.insert("type");
+    m_used.insert("id");
+  }
+
+  [[noreturn]] void fail(const std::string& msg) const {
+    throw std::invalid_argument(m_ctx.source + ": " + m_what + ": " + msg);
+  }
+  const std::string& what() const { return m_what; }
+  Context& ctx() const { return m_ctx; }
+  bool has(const std::string& k) const { return m_j.contains(k); }
+  const json& raw(const std::string& k) const {
+    m_used.insert(k);
+    return m_j.at(k);
+  }
+
+  float number(const std::string& k, float def) const { return has(k) ? number(k) : def; }
+  float number(const std::string& k) const {
+    if (!has(k)) fail("missing parameter '" + k + "'");
+    const json& v = raw(k);
+    if (!v.is_number()) fail("'" + k + "' must be a number (got " + v.dump() + ")");
+    const double d = v.get<double>();
+    if (!std::isfinite(d)) fail("'" + k + "' must be finite (got " + v.dump() + ")");
+    return float(d);
+  }
+  int integer(const std::string& k, int def) const {
+    if (!has(k)) return def;
+    const json& v = raw(k);
+    if (!v.is_number_integer()) fail("'" + k + "' must be an integer (got " + v.dump() + ")");
+    return v.get<int>();
+  }
+  bool boolean(const std::string& k, bool def) const {
+    if (!has(k)) return def;
+    const json& v = raw(k);
+    if (!v.is_boolean()) fail("'" + k + "' must be true or false (got " + v.dump() + ")");
+    return v.get<bool>();
+  }
+  std::string string(const std::string& k, const std::string& def) const {
+    if (!has(k)) return def;
+    const json& v = raw(k);
+    if (!v.is_string()) fail("'" + k + "' must be a string (got " + v.dump() + ")");
+    return v.get<std::string>();
+  }
+  std::string required_string(const std::string& k) const {
+    if (!has(k)) fail("missing parameter '" + k + "'");
+    return string(k, "");
+  }
+  // A file path relative to the scene file's folder; it must exist.
+  std::string file(const std::string& k) const {
+    const std::string name = required_string(k);
+    std::filesystem::path p(name);
+    if (p.is_relative()) p = m_ctx.base_dir / p;
+    if (!std::filesystem::exists(p)) fail("file '" + name + "' not found (looked for " + p.string() + ")");
+    return p.string();
+  }
+
+  std::vector<double> numbers(const json& v, const std::string& k, size_t n) const {
+    if (v.is_object() && v.contains("__limn_array__")) {
+      const ArrayData& a = array_ref(v, k);
+      if (a.values.size() != n) fail("'" + k + "' must have " + std::to_string(n) + " values (got " + std::to_string(a.values.size()) + ")");
+      for (double d : a.values) if (!std::isfinite(d)) fail("'" + k + "' has a non-finite entry");
+      return a.values;
+    }
+    if (!v.is_array() || v.size() != n) fail("'" + k + "' must be a list of " + std::to_string(n) + " numbers (got " + v.dump() + ")");
+    std::vector<double> out;
+    for (const json& e : v) {
+      if (!e.is_number() || !std::isfinite(e.get<double>())) fail("'" + k + "' must contain finite numbers (got " + v.dump() + ")");
+      out.push_back(e.get<double>());
+    }
+    return out;
+  }
+  Vec3 vec3(const std::string& k, const Vec3& def) const {
+    if (!has(k)) return def;
+    const auto v = numbers(raw(k), k, 3);
+    return Vec3(float(v[0]), float(v[1]), float(v[2]));
+  }
+  // A number (grey), a list [r, g, b], or {"type": "rgb", "value": ...}.
+  Spectrum spectrum(const std::string& k, const Spectrum& def) const {
+    if (!has(k)) return def;
+    return spectrum_value(raw(k), k);
+  }
+  Spectrum spectrum_value(const json& v0, const std::string& k) const {
+    const json* v = &v0;
+    if (v->is_object() && v->value("type", "") == "rgb") {
+      if (!v->contains("value")) fail("'" + k + "': rgb needs a 'value'");
+      v = &v->at("value");
+    }
+    Spectrum s;
+    if (v->is_number()) s = Spectrum(v->get<float>());
+    else if (v->is_object() && v->contains("type")) fail("'" + k + "' must be a colour (number, [r, g, b] or rgb), not a '" + v->value("type", "") + "'");
+    else {
+      const auto n = numbers(*v, k, 3);
+      s = Spectrum(float(n[0]), float(n[1]), float(n[2]));
+    }
+    if (!is_finite(s) || s.x < 0.0f || s.y < 0.0f || s.z < 0.0f) fail("'" + k + "' must be finite and >= 0 (got " + v->dump() + ")");
+    return s;
+  }
+  // A colour or {"type": "bitmap", "filename": ..., "raw": false}.
+  Texture texture(const std::string& k, const Spectrum& def) const {
+    Texture t;
+    t.value = def;
+    if (!has(k)) return t;
+    const json& v = raw(k);
+    if (v.is_object() && v.value("type", "") == "bitmap") {
+      Props bp(m_ctx, v, m_what + ": texture '" + k + "' (bitmap)");
+      const std::string path = bp.file("filename");
+      try {
+        t.bitmap = std::make_shared<Bitmap>(read_image(path, bp.boolean("raw", false)));
+      } catch (const std::invalid_argument& e) {
+        bp.fail(e.what());
+      }
+      bp.check_unused();
+      return t;
+    }
+    t.value = spectrum_value(v, k);
+    return t;
+  }
+
+  const ArrayData& array_ref(const json& v, const std::string& k) const {
+    const json& idx = v.at("__limn_array__");
+    if (!m_ctx.arrays || !idx.is_number_integer() || idx.get<size_t>() >= m_ctx.arrays->size())
+      fail("'" + k + "' refers to an array that was not passed");
+    return (*m_ctx.arrays)[idx.get<size_t>()];
+  }
+  // A dense array from nested JSON lists or from an array passed alongside the dictionary.
+  ArrayData array(const std::string& k) const {
+    if (!has(k)) fail("missing parameter '" + k + "'");
+    const json& v = raw(k);
+    if (v.is_object() && v.contains("__limn_array__")) return array_ref(v, k);
+    ArrayData a;
+    std::function<void(const json&, size_t)> walk = [&](const json& e, size_t depth) {
+      if (e.is_array()) {
+        if (a.shape.size() <= depth) a.shape.push_back(e.size());
+        else if (a.shape[depth] != e.size()) fail("'" + k + "' is a ragged array");
+        for (const json& x : e) walk(x, depth + 1);
+      } else if (e.is_number()) {
+        if (depth != a.shape.size()) fail("'" + k + "' is a ragged array");
+        a.values.push_back(e.get<double>());
+        a.integer = a.values.size() == 1 ? e.is_number_integer() : a.integer && e.is_number_integer();
+      } else {
+        fail("'" + k + "' must be an array of numbers");
+      }
+    };
+    walk(v, 0);
+    return a;
+  }
+
+  Transform transform(const std::string& k) const {
+    if (!has(k)) return Transform();
+    try {
+      return parse_transform(raw(k), k);
+    } catch (const std::invalid_argument& e) {
+      if (std::string(e.what()).rfind(m_ctx.source, 0) == 0) throw;
+      fail("'" + k + "': " + e.what());
+    }
+  }
+
+  // Nested objects (values that are dictionaries with a "type"), in file order.
+  std::vector<std::pair<std::string, const json*>> children() const {
+    std::vector<std::pair<std::string, const json*>> out;
+    for (auto it = m_j.begin(); it != m_j.end(); ++it)
+      if (it.value().is_object() && it.value().contains("type") && it.value().at("type").is_string() && !m_used.count(it.key())) {
+        out.emplace_back(it.key(), &it.value());
+      }
+    return out;
+  }
+  void mark_used(const std::string& k) const { m_used.insert(k); }
+
+  void check_unused() const {
+    for (auto it = m_j.begin(); it != m_j.end(); ++it)
+      if (!m_used.count(it.key()))
+        m_ctx.scene->warnings.push_back(m_ctx.source + ": " + m_what + ": unused parameter '" + it.key() + "'");
+  }
+
+ private:
+  Transform parse_transform(const json& v, const std::string& k) const {
+    auto matrix = [&](const json& m) {
+      if (m.is_object() && m.contains("__limn_array__")) {
+        const ArrayData& a = array_ref(m, k);
+        if (a.values.size() != 16) fail("'" + k + "' matrix must be 4x4");
+        Mat4d out;
+        for (int r = 0; r < 4; ++r)
+          for (int c = 0; c < 4; ++c) out[c][r] = a.values[size_t(r) * 4 + c];
+        return Transform(out);
+      }
+      if (!m.is_array() || m.size() != 4) fail("'" + k + "' matrix must be a list of 4 rows of 4 numbers");
+      Mat4d out;
+      for (int r = 0; r < 4; ++r) {
+        const auto row = numbers(m[r], k, 4);
+        for (int c = 0; c < 4; ++c) out[c][r] = row[c];
+      }
+      return Transform(out);
+    };
+    auto vec3d = [&](const json& e) {
+      const auto n = numbers(e, k, 3);
+      return Vec3d(n[0], n[1], n[2]);
+    };
+    if (v.is_array() && !v.empty() && v[0].is_array()) return matrix(v);
+    if (v.is_object() && v.contains("__limn_array__")) return matrix(v);
+    if (v.is_array()) {
+      Transform t;
+      for (const json& step : v) t = parse_transform(step, k) * t;  // first in the list is applied first
+      return t;
+    }
+    if (!v.is_object() || v.size() != 1)
+      fail("'" + k + "' must be a 4x4 matrix, one of {translate, scale, rotate, look_at, matrix}, or a list of them (got " + v.dump() + ")");
+    const auto& [op, arg] = *v.items().begin();
+    if (op == "translate") return Transform::translate(vec3d(arg));
+    if (op == "scale") return Transform::scale(arg.is_number() ? Vec3d(arg.get<double>()) : vec3d(arg));
+    if (op == "matrix") return matrix(arg);
+    if (op == "rotate") {
+      if (!arg.is_object() || !arg.contains("axis") || !arg.contains("angle") || !arg.at("angle").is_number())
+        fail("'" + k + "': rotate needs {\"axis\": [x, y, z], \"angle\": degrees}");
+      return Transform::rotate(vec3d(arg.at("axis")), arg.at("angle").get<double>());
+    }
+    if (op == "look_at") {
+      if (!arg.is_object() || !arg.contains("origin") || !arg.contains("target"))
+        fail("'" + k + "': look_at needs origin, target and up");
+      return Transform::look_at(vec3d(arg.at("origin")), vec3d(arg.at("target")),
+                                arg.contains("up") ? vec3d(arg.at("up")) : Vec3d(0, 0, 1));
+    }
+    fail("'" + k + "': unknown transform '" + op + "' (known: translate, scale, rotate, look_at, matrix)");
+  }
+
+  Context& m_ctx;
+  const json& m_j;
+  std::string m_what;
+  mutable std::set<std::string> m_used;
+};
+
+std::string type_of(const json& j) { return j.at("type").get<std::string>(); }
+
+std::string describe(const std::string& kind, const std::string& id, const std::string& type) {
+  return kind + " '" + id + "' (" + type + ")";
+}
+
+// ---- BSDFs ----------------------------------------------------------------------------------------
+struct ConductorIor {
+  Spectrum eta, k;
+};
+// RGB approximations of measured complex IORs (values at roughly 650, 550 and 450 nm).
+const std::map<std::string, ConductorIor>& conductor_table() {
+  static const std::map<std::string, ConductorIor> t = {
+      {"none", {Spectrum(0.0f), Spectrum(1.0f)}},
+      {"Au", {Spectrum(0.143f, 0.374f, 1.442f), Spectrum(3.983f, 2.385f, 1.603f)}},
+      {"Ag", {Spectrum(0.155f, 0.117f, 0.138f), Spectrum(4.828f, 3.122f, 2.147f)}},
+      {"Cu", {Spectrum(0.200f, 0.924f, 1.102f), Spectrum(3.912f, 2.452f, 2.142f)}},
+      {"Al", {Spectrum(1.657f, 0.880f, 0.521f), Spectrum(9.224f, 6.270f, 4.837f)}}};
+  return t;
+}
+
+float ior_value(const Props& p, const std::string& k, float def) {
+  static const std::map<std::string, float> names = {
+      {"vacuum", 1.0f},        {"helium", 1.00004f},      {"hydrogen", 1.00013f}, {"air", 1.00028f},
+      {"water", 1.3330f},      {"ethanol", 1.361f},       {"fused quartz", 1.458f}, {"pyrex", 1.470f},
+      {"acrylic glass", 1.49f}, {"polypropylene", 1.49f}, {"bk7", 1.5046f},       {"sodium chloride", 1.544f},
+      {"amber", 1.55f},        {"pet", 1.5750f},          {"diamond", 2.419f}};
+  if (!p.has(k)) return def;
+  const json& v = p.raw(k);
+  float ior;
+  if (v.is_string()) {
+    auto it = names.find(v.get<std::string>());
+    if (it == names.end()) p.fail("unknown material name '" + v.get<std::string>() + "' for '" + k + "'");
+    ior = it->second;
+  } else {
+    ior = p.number(k);
+  }
+  if (!(ior > 0.0f)) p.fail("'" + k + "' must be > 0 (got " + std::to_string(ior) + ")");
+  return ior;
+}
+
+Microfacet load_microfacet(const Props& p) {
+  Microfacet m;
+  const std::string dist = p.string("distribution", "beckmann");
+  if (dist == "ggx") m.type = MicrofacetType::GGX;
+  else if (dist == "beckmann") m.type = MicrofacetType::Beckmann;
+  else p.fail("distribution must be 'ggx' or 'beckmann' (got '" + dist + "')");
+  m.alpha = p.number("alpha", 0.1f);
+  if (p.has("alpha_u") || p.has("alpha_v")) {
+    const float au = p.number("alpha_u", m.alpha), av = p.number("alpha_v", m.alpha);
+    if (au != av) p.fail("anisotropic roughness is not supported (alpha_u " + std::to_string(au) + " != alpha_v " + std::to_string(av) + ")");
+    m.alpha = au;
+  }
+  if (!(m.alpha > 0.0f)) p.fail("alpha must be > 0 (got " + std::to_string(m.alpha) + "); use 'conductor' or 'dielectric' for smooth surfaces");
+  m.sample_visible = p.boolean("sample_visible", true);
+  return m;
+}
+
+void load_conductor_ior(const Props& p, Spectrum& eta, Spectrum& k) {
+  if (p.has("eta") || p.has("k")) {
+    if (p.has("material")) p.fail("give either 'material' or 'eta' and 'k', not both");
+    eta = p.spectrum("eta", Spectrum(0.0f));
+    k = p.spectrum("k", Spectrum(1.0f));
+    return;
+  }
+  const std::string name = p.string("material", "none");
+  auto it = conductor_table().find(name);
+  if (it == conductor_table().end()) p.fail("unknown conductor material '" + name + "' (known: none, Au, Ag, Cu, Al)");
+  eta = it->second.eta;
+  k = it->second.k;
+}
+
+Bsdf load_bsdf(Context& ctx, const json& j, const std::string& id);
+
+BsdfModel load_bsdf_model(Context& ctx, const Props& p, const std::string& type, const std::string& id, bool& twosided) {
+  if (type == "diffuse") return Diffuse{p.texture("reflectance", Spectrum(0.5f))};
+  if (type == "conductor") {
+    Conductor c;
+    load_conductor_ior(p, c.eta, c.k);
+    c.specular_reflectance = p.spectrum("specular_reflectance", Spectrum(1.0f));
+    return c;
+  }
+  if (type == "roughconductor") {
+    RoughConductor c;
+    load_conductor_ior(p, c.eta, c.k);
+    c.specular_reflectance = p.spectrum("specular_reflectance", Spectrum(1.0f));
+    c.distribution = load_microfacet(p);
+    return c;
+  }
+  if (type == "dielectric" || type == "roughdielectric") {
+    const float eta = ior_value(p, "int_ior", 1.5046f) / ior_value(p, "ext_ior", 1.000277f);
+    const Spectrum r = p.spectrum("specular_reflectance", Spectrum(1.0f)), t = p.spectrum("specular_transmittance", Spectrum(1.0f));
+    if (std::abs(eta - 1.0f) < 1e-6f) p.fail("int_ior and ext_ior must differ (an index-matched interface is invisible)");
+    if (type == "dielectric") return Dielectric{eta, r, t};
+    return RoughDielectric{eta, r, t, load_microfacet(p)};
+  }
+  if (type == "twosided") {
+    const auto kids = p.children();
+    if (kids.size() != 1) p.fail("twosided needs exactly one nested bsdf (got " + std::to_string(kids.size()) + ")");
+    p.mark_used(kids[0].first);
+    Bsdf inner = load_bsdf(ctx, *kids[0].second, id);
+    if (inner.twosided) p.fail("twosided cannot wrap another twosided");
+    if (inner.transmits()) p.fail("twosided cannot wrap a transmissive bsdf");
+    twosided = true;
+    return inner.model;
+  }
+  p.fail("unknown bsdf type '" + type + "' (known: " + known_of(Category::Bsdf) + ")");
+}
+
+Bsdf load_bsdf(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("bsdf", id, type));
+  Bsdf b;
+  b.id = id;
+  b.model = load_bsdf_model(ctx, p, type, id, b.twosided);
+  p.check_unused();
+  return b;
+}
+
+// ---- shapes ---------------------------------------------------------------------------------------
+void check_similarity(const Props& p, const Transform& t, float& scale) {
+  const Mat4d& m = t.matrix();
+  const double sx = glm::length(Vec3d(m[0])), sy = glm::length(Vec3d(m[1])), sz = glm::length(Vec3d(m[2]));
+  const double tol = 1e-5 * std::max(sx, std::max(sy, sz));
+  if (std::abs(sx - sy) > tol || std::abs(sx - sz) > tol || std::abs(glm::dot(Vec3d(m[0]), Vec3d(m[1]))) > tol * sx ||
+      std::abs(glm::dot(Vec3d(m[0]), Vec3d(m[2]))) > tol * sx || std::abs(glm::dot(Vec3d(m[1]), Vec3d(m[2]))) > tol * sx)
+    p.fail("to_world of a sphere must be a rotation, uniform scale and translation");
+  scale = float(sx);
+}
+
+Mesh build_mesh(const Props& p, MeshData data, const Transform& to_world, bool face_normals) {
+  const size_t nv = data.positions.size() / 3;
+  for (size_t v = 0; v < nv; ++v)
+    for (int c = 0; c < 3; ++c)
+      if (!std::isfinite(data.positions[3 * v + c])) {
+        std::ostringstream s;
+        s << "vertex " << v << " is not finite ([" << data.positions[3 * v] << ", " << data.positions[3 * v + 1] << ", "
+          << data.positions[3 * v + 2] << "])";
+        p.fail(s.str());
+      }
+  for (size_t i = 0; i < data.indices.size(); ++i)
+    if (data.indices[i] >= nv)
+      p.fail("triangle " + std::to_string(i / 3) + " refers to vertex " + std::to_string(data.indices[i]) + " but there are only " +
+             std::to_string(nv) + " vertices");
+  Mesh m;
+  m.face_normals = face_normals;
+  m.indices = weld_by_position(data.positions, data.indices, m.positions);
+  m.corner_uvs = std::move(data.corner_uvs);
+  for (size_t v = 0; v < m.positions.size(); v += 3) {
+    const Vec3 q = to_world.point(Vec3(m.positions[v], m.positions[v + 1], m.positions[v + 2]));
+    m.positions[v] = q.x; m.positions[v + 1] = q.y; m.positions[v + 2] = q.z;
+  }
+  // A mirroring transform reverses the winding; swap two corners so normals keep pointing outwards.
+  if (glm::determinant(to_world.matrix()) < 0.0)
+    for (size_t t = 0; t < m.indices.size(); t += 3) {
+      std::swap(m.indices[t + 1], m.indices[t + 2]);
+      if (!m.corner_uvs.empty())
+        for (int c = 0; c < 2; ++c) std::swap(m.corner_uvs[2 * (t + 1) + c], m.corner_uvs[2 * (t + 2) + c]);
+    }
+
+  // Degenerate triangles (zero area or repeated vertices after welding): an error unless allowed.
+  const bool allow = p.boolean("allow_degenerate", false);
+  std::vector<uint32_t> kept;
+  std::vector<float> kept_uv;
+  size_t dropped = 0, first_bad = 0;
+  for (size_t t = 0; t < m.indices.size() / 3; ++t) {
+    const uint32_t a = m.indices[3 * t], b = m.indices[3 * t + 1], c = m.indices[3 * t + 2];
+    const float area = glm::length(glm::cross(m.vertex(b) - m.vertex(a), m.vertex(c) - m.vertex(a)));
+    if (a == b || b == c || a == c || !(area > 0.0f)) {
+      if (!allow) {
+        std::ostringstream s;
+        s << "triangle " << t << " is degenerate (vertices " << a << ", " << b << ", " << c
+          << " enclose zero area); fix the mesh or set \"allow_degenerate\": true to drop such triangles";
+        p.fail(s.str());
+      }
+      if (dropped++ == 0) first_bad = t;
+      continue;
+    }
+    kept.insert(kept.end(), {a, b, c});
+    if (!m.corner_uvs.empty()) kept_uv.insert(kept_uv.end(), m.corner_uvs.begin() + 6 * t, m.corner_uvs.begin() + 6 * t + 6);
+  }
+  if (dropped) {
+    p.ctx().scene->warnings.push_back(p.ctx().source + ": " + p.what() + ": dropped " + std::to_string(dropped) +
+                                      " degenerate triangle(s), the first is triangle " + std::to_string(first_bad));
+    m.indices = std::move(kept);
+    m.corner_uvs = std::move(kept_uv);
+  }
+  if (m.indices.empty()) p.fail("mesh has no triangles");
+  return m;
+}
+
+MeshData mesh_from_arrays(const Props& p) {
+  MeshData d;
+  const ArrayData v = p.array("vertex_positions");
+  if (v.shape.size() != 2 || v.shape[1] != 3) p.fail("'vertex_positions' must have shape (N, 3)");
+  d.positions.assign(v.values.begin(), v.values.end());
+  const ArrayData f = p.array("faces");
+  if (f.shape.size() != 2 || f.shape[1] != 3) p.fail("'faces' must have shape (F, 3)");
+  if (!f.integer) p.fail("'faces' must hold integers");
+  for (double x : f.values) {
+    if (x < 0) p.fail("'faces' has a negative index (" + std::to_string(int64_t(x)) + ")");
+    d.indices.push_back(uint32_t(x));
+  }
+  if (p.has("corner_uvs")) {
+    const ArrayData uv = p.array("corner_uvs");
+    if (uv.values.size() != d.indices.size() * 2) p.fail("'corner_uvs' must have shape (F, 3, 2)");
+    d.corner_uvs.assign(uv.values.begin(), uv.values.end());
+  }
+  return d;
+}
+
+MeshData rectangle_data() {
+  return MeshData{{-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0}, {0, 1, 2, 0, 2, 3}, {0, 0, 1, 0, 1, 1, 0, 0, 1, 1, 0, 1}};
+}
+
+MeshData cube_data() {
+  MeshData d;
+  for (int axis = 0; axis < 3; ++axis)
+    for (float sign : {-1.0f, 1.0f}) {
+      const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+      const uint32_t base = uint32_t(d.positions.size() / 3);
+      const float corners[4][2] = {{-1, -1}, {1, -1}, {1, 1}, {-1, 1}};
+      for (const auto& c : corners) {
+        float p[3];
+        p[axis] = sign;
+        p[a1] = c[0];
+        p[a2] = c[1];
+        d.positions.insert(d.positions.end(), {p[0], p[1], p[2]});
+      }
+      // (a1, a2, axis) is right-handed, so counter-clockwise in (a1, a2) faces +axis.
+      if (sign > 0) d.indices.insert(d.indices.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+      else d.indices.insert(d.indices.end(), {base, base + 2, base + 1, base, base + 3, base + 2});
+      const float uv_pos[12] = {0, 0, 1, 0, 1, 1, 0, 0, 1, 1, 0, 1}, uv_neg[12] = {0, 0, 1, 1, 1, 0, 0, 0, 0, 1, 1, 1};
+      d.corner_uvs.insert(d.corner_uvs.end(), sign > 0 ? uv_pos : uv_neg, (sign > 0 ? uv_pos : uv_neg) + 12);
+    }
+  return d;
+}
+
+int add_bsdf(Context& ctx, Bsdf b) {
+  ctx.scene->bsdfs.push_back(std::move(b));
+  return int(ctx.scene->bsdfs.size() - 1);
+}
+
+void load_shape(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("shape", id, type));
+  Shape shape;
+  shape.id = id;
+  shape.type = type;
+  const Transform to_world = p.transform("to_world");
+  if (type == "sphere") {
+    Sphere s;
+    s.center = p.vec3("center", Vec3(0.0f));
+    s.radius = p.number("radius", 1.0f);
+    if (!(s.radius > 0.0f)) p.fail("radius must be > 0 (got " + std::to_string(s.radius) + ")");
+    if (p.has("to_world")) {
+      float scale;
+      check_similarity(p, to_world, scale);
+      s.center = to_world.point(s.center);
+      s.radius *= scale;
+    }
+    shape.geometry = s;
+  } else {
+    MeshData data;
+    bool face_normals = p.boolean("face_normals", type == "rectangle" || type == "cube");
+    if (type == "obj" || type == "ply") {
+      const std::string path = p.file("filename");
+      try {
+        data = read_mesh_file(path);
+      } catch (const std::invalid_argument& e) {
+        p.fail(e.what());
+      }
+    } else if (type == "mesh") {
+      data = mesh_from_arrays(p);
+    } else if (type == "rectangle") {
+      data = rectangle_data();
+    } else if (type == "cube") {
+      data = cube_data();
+    } else {
+      p.fail("unknown shape type '" + type + "' (known: " + known_of(Category::Shape) + ")");
+    }
+    if (p.boolean("flip_normals", false))
+      for (size_t t = 0; t < data.indices.size(); t += 3) std::swap(data.indices[t + 1], data.indices[t + 2]);
+    shape.geometry = build_mesh(p, std::move(data), to_world, face_normals);
+  }
+
+  // Nested bsdf (inline or reference) and area emitter.
+  for (const auto& [key, child] : p.children()) {
+    const std::string ctype = type_of(*child);
+    auto cat = known_types().find(ctype);
+    if (cat == known_types().end()) p.fail("unknown nested object type '" + ctype + "' under '" + key + "'");
+    p.mark_used(key);
+    if (cat->second == Category::Ref) {
+      const std::string ref = child->value("id", "");
+      auto it = ctx.named_bsdfs.find(ref);
+      if (it == ctx.named_bsdfs.end()) p.fail("'" + key + "' refers to unknown bsdf '" + ref + "'");
+      if (shape.bsdf >= 0) p.fail("has more than one bsdf");
+      shape.bsdf = it->second;
+    } else if (cat->second == Category::Bsdf) {
+      if (shape.bsdf >= 0) p.fail("has more than one bsdf");
+      shape.bsdf = add_bsdf(ctx, load_bsdf(ctx, *child, child->value("id", id)));
+    } else if (cat->second == Category::Emitter) {
+      if (ctype != "area") p.fail("only 'area' emitters can be attached to a shape (got '" + ctype + "' under '" + key + "')");
+      if (shape.emitter >= 0) p.fail("has more than one emitter");
+      Props ep(ctx, *child, describe("emitter", id, ctype));
+      AreaEmitter a;
+      a.shape = int(ctx.scene->shapes.size());
+      a.radiance = ep.spectrum("radiance", Spectrum(1.0f));
+      ep.check_unused();
+      ctx.scene->emitters.push_back(Emitter{child->value("id", id), a});
+      shape.emitter = int(ctx.scene->emitters.size() - 1);
+    } else {
+      p.fail("a '" + ctype + "' cannot be nested in a shape (under '" + key + "')");
+    }
+  }
+  if (shape.bsdf < 0) shape.bsdf = add_bsdf(ctx, Bsdf{id, Diffuse{Texture{Spectrum(0.5f), nullptr}}, false});
+  p.check_unused();
+  ctx.scene->shapes.push_back(std::move(shape));
+}
+
+// ---- emitters, sensor, integrator -------------------------------------------------------------------
+void load_emitter(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("emitter", id, type));
+  Emitter e;
+  e.id = id;
+  if (type == "point") {
+    PointEmitter pe;
+    pe.position = p.has("position") ? p.vec3("position", Vec3(0.0f)) : p.transform("to_world").point(Vec3(0.0f));
+    pe.intensity = p.spectrum("intensity", Spectrum(1.0f));
+    e.model = pe;
+  } else if (type == "directional") {
+    DirectionalEmitter de;
+    const Vec3 d = p.has("direction") ? p.vec3("direction", Vec3(0, 0, 1)) : p.transform("to_world").vector(Vec3(0, 0, 1));
+    if (!(glm::length(d) > 0.0f)) p.fail("direction must be non-zero");
+    de.direction = glm::normalize(d);
+    de.irradiance = p.spectrum("irradiance", Spectrum(1.0f));
+    e.model = de;
+  } else if (type == "constant") {
+    e.model = ConstantEmitter{p.spectrum("radiance", Spectrum(1.0f))};
+  } else if (type == "envmap") {
+    EnvmapEmitter env;
+    const std::string path = p.file("filename");
+    try {
+      env.image = std::make_shared<Bitmap>(read_image(path, false));
+    } catch (const std::invalid_argument& err) {
+      p.fail(err.what());
+    }
+    env.world_from_env = p.transform("to_world");
+    env.scale = p.number("scale", 1.0f);
+    if (!(env.scale >= 0.0f)) p.fail("scale must be >= 0 (got " + std::to_string(env.scale) + ")");
+    e.model = std::move(env);
+  } else if (type == "area") {
+    p.fail("an 'area' emitter must be nested inside a shape");
+  } else {
+    p.fail("unknown emitter type '" + type + "' (known: " + known_of(Category::Emitter) + ")");
+  }
+  p.check_unused();
+  ctx.scene->emitters.push_back(std::move(e));
+}
+
+void load_sensor(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("sensor", id, type));
+  if (type != "perspective") p.fail("unknown sensor type '" + type + "' (known: perspective)");
+  Camera& cam = ctx.scene->camera;
+  cam.width = 768;
+  cam.height = 576;
+  for (const auto& [key, child] : p.children()) {
+    const std::string ctype = type_of(*child);
+    p.mark_used(key);
+    if (ctype == "hdrfilm") {
+      Props fp(ctx, *child, describe("film", key, ctype));
+      cam.width = fp.integer("width", 768);
+      cam.height = fp.integer("height", 576);
+      if (cam.width <= 0 || cam.height <= 0 || cam.width > 32768 || cam.height > 32768)
+        fp.fail("width and height must be in [1, 32768] (got " + std::to_string(cam.width) + " x " + std::to_string(cam.height) + ")");
+      for (const auto& [fk, fchild] : fp.children()) {
+        fp.mark_used(fk);
+        const std::string ft = type_of(*fchild);
+        if (ft != "box") ctx.scene->warnings.push_back(ctx.source + ": film '" + key + "': reconstruction filter '" + ft +
+                                                       "' is not supported; limn averages samples uniformly over each pixel (box)");
+      }
+      fp.mark_used("pixel_format");
+      fp.mark_used("component_format");
+      fp.check_unused();
+    } else if (known_types().count(ctype) && known_types().at(ctype) == Category::Sampler) {
+      Props sp(ctx, *child, describe("sampler", key, ctype));
+      ctx.scene->spp = sp.integer("sample_count", 4);
+      if (ctx.scene->spp <= 0) sp.fail("sample_count must be > 0 (got " + std::to_string(ctx.scene->spp) + ")");
+      if (ctype != "independent") ctx.scene->warnings.push_back(ctx.source + ": sampler '" + key + "': '" + ctype + "' is rendered with independent samples");
+      sp.mark_used("seed");
+      sp.check_unused();
+    } else {
+      p.fail("a '" + ctype + "' cannot be nested in a sensor (under '" + key + "')");
+    }
+  }
+  cam.world_from_camera = p.transform("to_world");
+  try {
+    cam.set_fov(p.number("fov", 39.3077f), p.string("fov_axis", "x"));
+  } catch (const std::invalid_argument& e) {
+    p.fail(e.what());
+  }
+  cam.near_clip = p.number("near_clip", 1e-2f);
+  cam.far_clip = p.number("far_clip", 1e4f);
+  if (!(cam.near_clip > 0.0f && cam.far_clip > cam.near_clip)) p.fail("need 0 < near_clip < far_clip");
+  p.check_unused();
+}
+
+void load_integrator(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("integrator", id, type));
+  IntegratorSettings& s = ctx.scene->integrator;
+  s.type = type;
+  s.hide_emitters = p.boolean("hide_emitters", false);
+  if (type == "path") {
+    s.max_depth = p.integer("max_depth", -1);
+    s.rr_depth = p.integer("rr_depth", 5);
+    if (s.max_depth < -1) p.fail("max_depth must be -1 (unbounded) or >= 0 (got " + std::to_string(s.max_depth) + ")");
+    if (s.rr_depth < 1) p.fail("rr_depth must be >= 1 (got " + std::to_string(s.rr_depth) + ")");
+  } else if (type == "direct") {
+    s.max_depth = 2;  // emitters seen directly plus one bounce
+    s.rr_depth = std::numeric_limits<int>::max();
+  } else {
+    p.fail("unknown integrator type '" + type + "' (known: path, direct)");
+  }
+  p.check_unused();
+}
+
+}  // namespace
+
+std::unique_ptr<Scene> load_scene_dict(const json& d, const std::string& source, const std::filesystem::path& base_dir,
+                                       const std::vector<ArrayData>& arrays) {
+  auto scene = std::make_unique<Scene>();
+  scene->source = source;
+  Context ctx{source, base_dir, &arrays, scene.get(), {}, {}};
+  if (!d.is_object()) throw std::invalid_argument(source + ": the scene description must be a dictionary");
+  if (d.contains("type") && d.at("type") != "scene")
+    throw std::invalid_argument(source + ": top-level \"type\" must be \"scene\" (got " + d.at("type").dump() + ")");
+
+  // Classify the top-level objects, then load in dependency order: bsdfs (shapes may refer to them),
+  // shapes (area emitters live in them), the rest.
+  std::vector<std::pair<std::string, const json*>> by_cat[16];
+  for (auto it = d.begin(); it != d.end(); ++it) {
+    if (it.key() == "type") continue;
+    const json& v = it.value();
+    if (!v.is_object() || !v.contains("type") || !v.at("type").is_string())
+      throw std::invalid_argument(source + ": '" + it.key() + "' must be an object with a \"type\" (got " + v.dump().substr(0, 80) + ")");
+    const std::string type = v.at("type").get<std::string>();
+    auto cat = known_types().find(type);
+    if (cat == known_types().end() || cat->second == Category::Scene || cat->second == Category::Texture || cat->second == Category::Ref)
+      throw std::invalid_argument(source + ": '" + it.key() + "' has unknown type '" + type + "' (known: sensors " + known_of(Category::Sensor) +
+                                  "; integrators " + known_of(Category::Integrator) + "; shapes " + known_of(Category::Shape) + "; bsdfs " +
+                                  known_of(Category::Bsdf) + "; emitters " + known_of(Category::Emitter) + ")");
+    const std::string id = v.value("id", it.key());
+    if (!ctx.ids.insert(id).second) throw std::invalid_argument(source + ": duplicate id '" + id + "'");
+    by_cat[int(cat->second)].emplace_back(id, &v);
+  }
+  for (const auto& [id, j] : by_cat[int(Category::Bsdf)]) ctx.named_bsdfs[id] = add_bsdf(ctx, load_bsdf(ctx, *j, id));
+  for (const auto& [id, j] : by_cat[int(Category::Shape)]) load_shape(ctx, *j, id);
+  for (const auto& [id, j] : by_cat[int(Category::Emitter)]) load_emitter(ctx, *j, id);
+  const auto& sensors = by_cat[int(Category::Sensor)];
+  if (sensors.empty()) throw std::invalid_argument(source + ": the scene has no sensor (add a 'perspective' sensor)");
+  if (sensors.size() > 1) scene->warnings.push_back(source + ": " + std::to_string(sensors.size()) + " sensors; only '" + sensors[0].first + "' is used");
+  load_sensor(ctx, *sensors[0].second, sensors[0].first);
+  const auto& integrators = by_cat[int(Category::Integrator)];
+  if (integrators.size() > 1) throw std::invalid_argument(source + ": more than one integrator");
+  if (!integrators.empty()) load_integrator(ctx, *integrators[0].second, integrators[0].first);
+  for (int c : {int(Category::Film), int(Category::Sampler), int(Category::Filter)})
+    for (const auto& [id, j] : by_cat[c]) throw std::invalid_argument(source + ": '" + id + "' (" + type_of(*j) + ") must be nested in the sensor");
+  if (scene->emitters.empty()) scene->warnings.push_back(source + ": the scene has no emitters; it will render black");
+
+  scene->build();
+  return scene;
+}
+
+std::unique_ptr<Scene> load_scene_file(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw std::invalid_argument("scene file '" + path + "' not found or not readable");
+  json d;
+  try {
+    d = json::parse(f);
+  } catch (const json::parse_error& e) {
+    throw std::invalid_argument(path + ": malformed JSON: " + e.what());
+  }
+  std::filesystem::path base = std::filesystem::path(path).parent_path();
+  return load_scene_dict(d, path, base.empty() ? std::filesystem::path(".") : base);
+}
+
+}  // namespace limn

@@ -1,0 +1,100 @@
+// Piecewise-constant distributions on [0,1) and [0,1)^2, sampled by inverting the CDF.
+#pragma once
+#include <stdexcept>
+#include <vector>
+#include "core/math/vec.h"
+
+namespace limn {
+
+class Distribution1D {
+ public:
+  Distribution1D() = default;
+  explicit Distribution1D(std::vector<float> weights) : m_func(std::move(weights)) {
+    if (m_func.empty()) throw std::invalid_argument("Distribution1D: no weights");
+    m_cdf.assign(m_func.size() + 1, 0.0);
+    for (size_t i = 0; i < m_func.size(); ++i) {
+      if (!(m_func[i] >= 0.0f) || !std::isfinite(m_func[i]))
+        throw std::invalid_argument("Distribution1D: weight " + std::to_string(i) + " is negative or not finite");
+      m_cdf[i + 1] = m_cdf[i] + m_func[i];
+    }
+    m_integral = m_cdf.back() / double(m_func.size());
+    if (m_cdf.back() <= 0.0) {  // all zero: fall back to uniform so sampling stays defined
+      for (size_t i = 0; i <= m_func.size(); ++i) m_cdf[i] = double(i) / double(m_func.size());
+      m_all_zero = true;
+    } else {
+      for (auto& c : m_cdf) c /= m_cdf.back();
+    }
+  }
+  size_t size() const { return m_func.size(); }
+  // Mean of the weights (the integral of the step function over [0,1)).
+  double integral() const { return m_integral; }
+  // Probability of choosing bin i.
+  float pmf(size_t i) const { return float(m_cdf[i + 1] - m_cdf[i]); }
+  // Density on [0,1) of the continuous sample.
+  float pdf(float x) const {
+    const size_t i = std::min<size_t>(size_t(std::max(x, 0.0f) * m_func.size()), m_func.size() - 1);
+    return pmf(i) * float(m_func.size());
+  }
+  // Samples a bin and a continuous offset; returns x in [0,1) with density pdf(x).
+  float sample_continuous(float u, size_t* bin = nullptr, float* pdf_out = nullptr) const {
+    const size_t i = sample_discrete(u);
+    const double lo = m_cdf[i], hi = m_cdf[i + 1];
+    double du = hi > lo ? (double(u) - lo) / (hi - lo) : 0.5;
+    du = std::clamp(du, 0.0, 1.0 - 1e-7);  // keep x strictly inside bin i
+    if (bin) *bin = i;
+    if (pdf_out) *pdf_out = pmf(i) * float(m_func.size());
+    return float((double(i) + du) / double(m_func.size()));
+  }
+  size_t sample_discrete(float u) const {
+    // First i with cdf[i+1] > u, skipping empty bins.
+    auto it = std::upper_bound(m_cdf.begin() + 1, m_cdf.end(), double(u));
+    size_t i = size_t(it - m_cdf.begin()) - 1;
+    if (i >= m_func.size()) i = m_func.size() - 1;
+    while (i > 0 && pmf(i) == 0.0f) --i;
+    return i;
+  }
+  bool all_zero() const { return m_all_zero; }
+
+ private:
+  std::vector<float> m_func;
+  std::vector<double> m_cdf;
+  double m_integral = 0.0;
+  bool m_all_zero = false;
+};
+
+// Row-major 2D distribution: marginal over rows (v), conditional over columns (u) per row.
+class Distribution2D {
+ public:
+  Distribution2D() = default;
+  Distribution2D(const std::vector<float>& weights, int width, int height) : m_width(width), m_height(height) {
+    std::vector<float> row_mass(height);
+    for (int y = 0; y < height; ++y) {
+      std::vector<float> row(weights.begin() + size_t(y) * width, weights.begin() + size_t(y + 1) * width);
+      m_rows.emplace_back(row);
+      row_mass[y] = float(m_rows.back().integral());
+    }
+    m_marginal = Distribution1D(row_mass);
+  }
+  // Returns (u, v) in [0,1)^2 and its density with respect to the unit square.
+  Vec2 sample(const Vec2& u, float* pdf) const {
+    size_t row;
+    float pdf_v, pdf_u;
+    const float v = m_marginal.sample_continuous(u.y, &row, &pdf_v);
+    const float x = m_rows[row].sample_continuous(u.x, nullptr, &pdf_u);
+    *pdf = pdf_u * pdf_v;
+    return Vec2(x, v);
+  }
+  float pdf(const Vec2& p) const {
+    const int y = std::clamp(int(p.y * m_height), 0, m_height - 1);
+    return m_marginal.pdf(p.y) * m_rows[y].pdf(p.x);
+  }
+  int width() const { return m_width; }
+  int height() const { return m_height; }
+
+ private:
+  int m_width = 0, m_height = 0;
+  std::vector<Distribution1D> m_rows;
+  Distribution1D m_marginal;
+};
+
+}  // namespace limn

@@ -1,0 +1,79 @@
+// The closed set of emitters. Radiance units: area and environment emitters are radiance
+// (W m^-2 sr^-1), point lights intensity (W sr^-1), directional lights irradiance (W m^-2).
+#pragma once
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+#include "core/geometry/shape.h"
+#include "core/geometry/transform.h"
+#include "core/math/distribution.h"
+#include "core/render/texture.h"
+
+namespace limn {
+
+struct AreaEmitter {
+  int shape = -1;            // emits from the front side of this shape
+  Spectrum radiance{1.0f};
+};
+struct PointEmitter {
+  Vec3 position{0.0f};
+  Spectrum intensity{1.0f};
+};
+struct DirectionalEmitter {
+  Vec3 direction{0, 0, -1};  // unit; the direction light travels in
+  Spectrum irradiance{1.0f};
+};
+struct ConstantEmitter {
+  Spectrum radiance{1.0f};
+};
+// Equirectangular environment map, Mitsuba's convention: in the map's own frame +y is up and
+// (u, v) = (atan2(x, -z) / 2pi, acos(y) / pi). Looked up per texel (piecewise constant), which
+// is exactly the density importance sampling draws from.
+struct EnvmapEmitter {
+  std::shared_ptr<Bitmap> image;
+  Transform world_from_env;
+  float scale = 1.0f;
+  Distribution2D distribution;   // texel luminance * sin(theta)
+
+  void build_distribution();
+  Spectrum eval(const Vec3& d_world) const;
+  float pdf_solid_angle(const Vec3& d_world) const;
+  Vec3 sample(const Vec2& u, float* pdf_solid_angle) const;
+};
+
+using EmitterModel = std::variant<AreaEmitter, PointEmitter, DirectionalEmitter, ConstantEmitter, EnvmapEmitter>;
+
+struct Emitter {
+  std::string id;
+  EmitterModel model;
+  bool is_delta() const {
+    return std::holds_alternative<PointEmitter>(model) || std::holds_alternative<DirectionalEmitter>(model);
+  }
+  bool is_infinite() const {
+    return std::holds_alternative<ConstantEmitter>(model) || std::holds_alternative<EnvmapEmitter>(model) ||
+           std::holds_alternative<DirectionalEmitter>(model);
+  }
+};
+
+// A direction from a reference point towards an emitter.
+struct EmitterSample {
+  Vec3 wi;                  // unit direction from the reference point
+  Vec3 p;                   // point on the emitter (finite emitters) for shadow rays
+  bool to_infinity = false; // shadow ray is unbounded
+  Spectrum radiance{0.0f};  // arriving radiance (delta lights: irradiance-like value, see below)
+  float pdf = 0.0f;         // solid angle density of wi; 1 for delta emitters
+  bool delta = false;
+};
+
+// Samples a direction towards emitter e from point x. For delta emitters `radiance` is the
+// incident quantity that multiplies f |cos| directly (intensity / r^2, or irradiance).
+EmitterSample sample_emitter(const Emitter& e, const std::vector<Shape>& shapes, const Vec3& x, const Vec2& u, float u_extra);
+// Solid-angle density with which sample_emitter picks direction wi reaching point p_emitter on a
+// shape (area emitters) or escaping (infinite emitters).
+float pdf_emitter_area(const Emitter& e, const Shape& shape, const Vec3& x, const Vec3& p_emitter, const Vec3& n_emitter);
+// Radiance towards -d of an infinite emitter seen along direction d.
+Spectrum eval_infinite(const Emitter& e, const Vec3& d);
+float pdf_infinite(const Emitter& e, const Vec3& d);
+
+}  // namespace limn

@@ -1,0 +1,107 @@
+#include "core/render/integrators/path.h"
+
+namespace limn {
+namespace {
+
+bool emits_towards(const Scene& scene, const SurfaceInteraction& si, const Vec3& d) {
+  const Shape& s = scene.shapes[si.shape];
+  return s.emitter >= 0 && glm::dot(si.ng, d) < 0.0f;  // area emitters emit from their front side
+}
+
+Spectrum area_radiance(const Scene& scene, const SurfaceInteraction& si) {
+  return std::get<AreaEmitter>(scene.emitters[scene.shapes[si.shape].emitter].model).radiance;
+}
+
+// Next-event estimation at si: one emitter chosen uniformly, MIS-weighted against BSDF sampling.
+Spectrum estimate_direct(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, const Vec3& wi_local,
+                         Pcg32& rng, PathCounters& counters) {
+  const size_t n = scene.emitters.size();
+  const size_t k = std::min(size_t(rng.next_float() * n), n - 1);
+  const Emitter& e = scene.emitters[k];
+  const Vec2 u = rng.next_2d();
+  const float u_extra = rng.next_float();
+  const EmitterSample es = sample_emitter(e, scene.shapes, si.p, u, u_extra);
+  if (!(es.pdf > 0.0f) || is_black(es.radiance)) return Spectrum(0.0f);
+  const Vec3 wo_local = si.frame.to_local(es.wi);
+  // Shading-normal light leaks: the geometric and shading hemispheres must agree.
+  if (glm::dot(es.wi, si.ng) * wo_local.z <= 0.0f) return Spectrum(0.0f);
+  const Spectrum f = bsdf.eval(wi_local, wo_local, si.uv);
+  if (is_black(f)) return Spectrum(0.0f);
+  const Ray shadow = es.to_infinity ? spawn_ray(si, es.wi) : spawn_ray_to(si, es.p);
+  counters.rays++;
+  if (scene.occluded(shadow)) return Spectrum(0.0f);
+  const float pdf_light = es.pdf * scene.emitter_selection_pdf();
+  const float w = es.delta ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv));
+  return f * es.radiance * (w / pdf_light);
+}
+
+}  // namespace
+
+Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, PathCounters& counters) {
+  const IntegratorSettings& cfg = scene.integrator;
+  Spectrum L(0.0f), beta(1.0f);
+  Ray ray = camera_ray;
+  float prev_pdf = 0.0f;    // solid-angle pdf of the BSDF sample that produced `ray`
+  bool prev_delta = true;   // camera rays and delta lobes are not MIS-weighted
+  Vec3 prev_p(0.0f);
+  float eta_scale = 1.0f;   // product of eta^2 crossings, undoes radiance scaling inside RR
+
+  for (int depth = 0;; ++depth) {
+    SurfaceInteraction si;
+    counters.rays++;
+    if (!scene.intersect(ray, si)) {
+      if (depth == 0 && cfg.hide_emitters) break;
+      for (int idx : scene.infinite_emitters) {
+        const Emitter& e = scene.emitters[idx];
+        const Spectrum Le = eval_infinite(e, ray.d);
+        const float w = prev_delta ? 1.0f : mis_power(prev_pdf, pdf_infinite(e, ray.d) * scene.emitter_selection_pdf());
+        L += beta * Le * w;
+      }
+      break;
+    }
+
+    // Emission from an area emitter that was hit.
+    if (emits_towards(scene, si, ray.d) && !(depth == 0 && cfg.hide_emitters)) {
+      float w = 1.0f;
+      if (!prev_delta) {
+        const int ei = scene.shapes[si.shape].emitter;
+        const float pdf_light = pdf_emitter_area(scene.emitters[ei], scene.shapes[si.shape], prev_p, si.p, si.ng) *
+                                scene.emitter_selection_pdf();
+        w = mis_power(prev_pdf, pdf_light);
+      }
+      L += beta * area_radiance(scene, si) * w;
+    }
+
+    // A path of depth + 2 segments is the next one NEE or BSDF sampling would make.
+    if (cfg.max_depth >= 0 && depth + 2 > cfg.max_depth) break;
+
+    const Shape& shape = scene.shapes[si.shape];
+    const Bsdf& bsdf = scene.bsdfs[shape.bsdf];
+    const Vec3 wi_local = si.frame.to_local(-ray.d);
+
+    if (!bsdf.is_delta() && !scene.emitters.empty()) L += beta * estimate_direct(scene, si, bsdf, wi_local, rng, counters);
+
+    const float u_lobe = rng.next_float();
+    const auto bs = bsdf.sample(wi_local, u_lobe, rng.next_2d(), si.uv);
+    if (!bs) break;
+    const Vec3 wo = si.frame.to_world(bs->wo);
+    if (glm::dot(wo, si.ng) * bs->wo.z <= 0.0f) break;  // shading-normal leak
+    beta *= bs->weight;
+    prev_pdf = bs->pdf;
+    prev_delta = bs->delta;
+    prev_p = si.p;
+    eta_scale *= bs->eta * bs->eta;
+    ray = spawn_ray(si, wo);
+
+    // Russian roulette on the throughput with radiance scaling by refraction removed.
+    if (depth + 1 >= cfg.rr_depth) {
+      const float q = std::min(max_component(beta) * eta_scale, 0.95f);
+      if (!(rng.next_float() < q)) break;
+      beta /= q;
+    }
+    if (is_black(beta)) break;
+  }
+  return L;
+}
+
+}  // namespace limn

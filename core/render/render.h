@@ -1,0 +1,37 @@
+// Primal rendering: tiles over TBB threads, one PCG stream per pixel (thread-count independent).
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <stdexcept>
+#include <vector>
+#include "core/render/scene.h"
+
+namespace limn {
+
+struct Image {
+  int width = 0, height = 0;
+  std::vector<float> rgb;  // 3 floats per pixel, rows top to bottom, linear RGB
+};
+
+struct RenderOptions {
+  int spp = 0;             // 0: the scene's sampler sample_count
+  uint64_t seed = 0;
+  int threads = 0;         // 0: all cores
+  // Called now and then with the finished fraction; returning false cancels the render.
+  std::function<bool(float)> progress;
+};
+
+struct RenderStats {
+  double seconds = 0.0;
+  uint64_t samples = 0;
+  uint64_t rays = 0;
+  uint64_t invalid_samples = 0;  // NaN/Inf/negative path contributions, counted and dropped
+};
+
+struct RenderCancelled : std::runtime_error {
+  RenderCancelled() : std::runtime_error("render cancelled") {}
+};
+
+Image render(const Scene& scene, const RenderOptions& options, RenderStats* stats = nullptr);
+
+}  // namespace limn

@@ -1,0 +1,150 @@
+#include "core/render/scene.h"
+
+#include <cstring>
+#include <sstream>
+#include <stdexcept>
+
+namespace limn {
+
+void Scene::build() {
+  infinite_emitters.clear();
+  for (size_t i = 0; i < emitters.size(); ++i) {
+    if (auto* env = std::get_if<EnvmapEmitter>(&emitters[i].model)) env->build_distribution();
+    if (std::holds_alternative<ConstantEmitter>(emitters[i].model) || std::holds_alternative<EnvmapEmitter>(emitters[i].model))
+      infinite_emitters.push_back(int(i));
+  }
+  for (Shape& s : shapes)
+    if (s.is_mesh()) s.mesh().update_derived();
+  m_accel = std::make_unique<Accel>(shapes);
+  collect_parameters();
+  m_snapshots.clear();
+  for (const Parameter& p : m_params) m_snapshots.emplace_back(p.data, p.data + p.size());
+}
+
+void Scene::collect_parameters() {
+  m_params.clear();
+  for (size_t i = 0; i < shapes.size(); ++i) {
+    Shape& s = shapes[i];
+    if (s.is_mesh()) {
+      Mesh& m = s.mesh();
+      m_params.push_back({s.id + ".vertex_positions", Parameter::Kind::VertexPositions, int(i), m.positions.data(), {m.vertex_count(), 3}});
+    } else {
+      Sphere& sp = s.sphere();
+      m_params.push_back({s.id + ".center", Parameter::Kind::SphereCenter, int(i), &sp.center.x, {3}});
+      m_params.push_back({s.id + ".radius", Parameter::Kind::SphereRadius, int(i), &sp.radius, {}});
+    }
+  }
+  for (size_t i = 0; i < bsdfs.size(); ++i) {
+    Bsdf& b = bsdfs[i];
+    if (auto* d = std::get_if<Diffuse>(&b.model)) {
+      if (d->reflectance.bitmap) {
+        Bitmap& bm = *d->reflectance.bitmap;
+        m_params.push_back({b.id + ".reflectance", Parameter::Kind::Reflectance, int(i), bm.rgb.data(), {size_t(bm.height), size_t(bm.width), 3}});
+      } else {
+        m_params.push_back({b.id + ".reflectance", Parameter::Kind::Reflectance, int(i), &d->reflectance.value.x, {3}});
+      }
+    } else if (auto* rc = std::get_if<RoughConductor>(&b.model)) {
+      m_params.push_back({b.id + ".alpha", Parameter::Kind::Alpha, int(i), &rc->distribution.alpha, {}});
+    } else if (auto* rd = std::get_if<RoughDielectric>(&b.model)) {
+      m_params.push_back({b.id + ".alpha", Parameter::Kind::Alpha, int(i), &rd->distribution.alpha, {}});
+    }
+  }
+  for (size_t i = 0; i < emitters.size(); ++i) {
+    Emitter& e = emitters[i];
+    auto add = [&](const char* field, Spectrum& v) {
+      m_params.push_back({e.id + "." + field, Parameter::Kind::EmitterValue, int(i), &v.x, {3}});
+    };
+    std::visit([&](auto& m) {
+      using T = std::decay_t<decltype(m)>;
+      if constexpr (std::is_same_v<T, AreaEmitter> || std::is_same_v<T, ConstantEmitter>) add("radiance", m.radiance);
+      else if constexpr (std::is_same_v<T, PointEmitter>) add("intensity", m.intensity);
+      else if constexpr (std::is_same_v<T, DirectionalEmitter>) add("irradiance", m.irradiance);
+    }, e.model);
+  }
+}
+
+const Parameter* Scene::find_parameter(const std::string& name) const {
+  for (const Parameter& p : m_params)
+    if (p.name == name) return &p;
+  return nullptr;
+}
+
+namespace {
+std::string format_values(const float* v, size_t n) {
+  std::ostringstream s;
+  s << "[";
+  for (size_t i = 0; i < n; ++i) s << (i ? ", " : "") << v[i];
+  s << "]";
+  return s.str();
+}
+}  // namespace
+
+void Scene::validate_parameter(const Parameter& p) const {
+  const std::string where = source + ": parameter '" + p.name + "'";
+  const size_t n = p.size();
+  switch (p.kind) {
+    case Parameter::Kind::VertexPositions:
+    case Parameter::Kind::SphereCenter:
+      for (size_t i = 0; i < n; i += 3)
+        if (!std::isfinite(p.data[i]) || !std::isfinite(p.data[i + 1]) || !std::isfinite(p.data[i + 2]))
+          throw std::invalid_argument(where + ": " + (p.kind == Parameter::Kind::SphereCenter ? "center" : "vertex " + std::to_string(i / 3)) +
+                                      " is not finite (" + format_values(p.data + i, 3) + ")");
+      break;
+    case Parameter::Kind::SphereRadius:
+    case Parameter::Kind::Alpha:
+      if (!(std::isfinite(p.data[0]) && p.data[0] > 0.0f))
+        throw std::invalid_argument(where + ": must be finite and > 0 (got " + std::to_string(p.data[0]) + ")");
+      break;
+    case Parameter::Kind::Reflectance:
+    case Parameter::Kind::EmitterValue:
+      for (size_t i = 0; i < n; ++i)
+        if (!(std::isfinite(p.data[i]) && p.data[i] >= 0.0f))
+          throw std::invalid_argument(where + ": entry " + std::to_string(i) + " must be finite and >= 0 (got " + std::to_string(p.data[i]) + ")");
+      break;
+  }
+}
+
+void Scene::apply_parameter(const Parameter& p) {
+  switch (p.kind) {
+    case Parameter::Kind::VertexPositions:
+      shapes[p.index].mesh().update_derived();
+      m_accel->shape_changed(p.index);
+      break;
+    case Parameter::Kind::SphereCenter:
+    case Parameter::Kind::SphereRadius:
+      m_accel->shape_changed(p.index);
+      break;
+    case Parameter::Kind::Reflectance:
+    case Parameter::Kind::Alpha:
+    case Parameter::Kind::EmitterValue:
+      break;  // read directly by the renderer; nothing derived
+  }
+}
+
+std::vector<std::string> Scene::update() {
+  std::vector<size_t> changed;
+  for (size_t i = 0; i < m_params.size(); ++i)
+    if (std::memcmp(m_params[i].data, m_snapshots[i].data(), m_snapshots[i].size() * sizeof(float)) != 0) changed.push_back(i);
+  // Validate everything first, so a bad value leaves the whole scene as it was.
+  for (size_t i : changed) {
+    try {
+      validate_parameter(m_params[i]);
+    } catch (...) {
+      for (size_t j : changed) std::memcpy(m_params[j].data, m_snapshots[j].data(), m_snapshots[j].size() * sizeof(float));
+      throw;
+    }
+  }
+  bool geometry = false;
+  std::vector<std::string> names;
+  for (size_t i : changed) {
+    apply_parameter(m_params[i]);
+    std::memcpy(m_snapshots[i].data(), m_params[i].data, m_snapshots[i].size() * sizeof(float));
+    geometry |= m_params[i].kind == Parameter::Kind::VertexPositions || m_params[i].kind == Parameter::Kind::SphereCenter ||
+                m_params[i].kind == Parameter::Kind::SphereRadius;
+    names.push_back(m_params[i].name);
+  }
+  if (geometry) m_accel->commit();
+  return names;
+}
+
+}  // namespace limn

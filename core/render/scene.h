@@ -1,0 +1,73 @@
+// A loaded scene: shapes, materials, emitters, camera, integrator settings, the Embree
+// acceleration structure, and the table of parameters users may edit between renders.
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+#include "core/geometry/accel.h"
+#include "core/render/bsdfs/bsdf.h"
+#include "core/render/camera.h"
+#include "core/render/emitters/emitter.h"
+
+namespace limn {
+
+struct IntegratorSettings {
+  std::string type = "path";  // "path" or "direct"
+  int max_depth = -1;         // longest path in segments (Mitsuba: 1 = emitters seen directly); -1 = unbounded
+  int rr_depth = 5;           // Russian roulette from this depth on
+  bool hide_emitters = false; // directly visible emitters render black
+};
+
+// An editable parameter: a float view into scene memory plus what must happen when it changes.
+struct Parameter {
+  enum class Kind { VertexPositions, SphereCenter, SphereRadius, Reflectance, Alpha, EmitterValue };
+  std::string name;            // "<owner id>.<field>"
+  Kind kind;
+  int index;                   // shape, bsdf or emitter index
+  float* data;
+  std::vector<size_t> shape;   // numpy-style shape; empty for a scalar
+  size_t size() const {
+    size_t n = 1;
+    for (size_t s : shape) n *= s;
+    return n;
+  }
+};
+
+class Scene {
+ public:
+  std::string source = "<dict>";   // file the scene came from, for messages
+  Camera camera;
+  IntegratorSettings integrator;
+  int spp = 16;
+  std::vector<Shape> shapes;
+  std::vector<Bsdf> bsdfs;
+  std::vector<Emitter> emitters;
+  std::vector<int> infinite_emitters;  // constant and envmap emitters, hit by escaping rays
+  std::vector<std::string> warnings;   // unused parameters and other notes from loading
+
+  // Validates, computes derived state and builds the acceleration structure (once, after loading).
+  void build();
+  bool intersect(const Ray& ray, SurfaceInteraction& si) const { return m_accel->intersect(ray, si); }
+  bool occluded(const Ray& ray) const { return m_accel->occluded(ray); }
+
+  // Editable parameters, their values as of the last update().
+  std::vector<Parameter>& parameters() { return m_params; }
+  const Parameter* find_parameter(const std::string& name) const;
+  // Applies edits made through parameter views since the last update(): validates them (throws
+  // std::invalid_argument naming the parameter, index and value; the previous value is restored),
+  // refits geometry that moved and recomputes derived state. Returns the names that changed.
+  std::vector<std::string> update();
+
+  // Probability of choosing emitter i for next-event estimation (uniform selection).
+  float emitter_selection_pdf() const { return emitters.empty() ? 0.0f : 1.0f / float(emitters.size()); }
+
+ private:
+  void collect_parameters();
+  void validate_parameter(const Parameter& p) const;
+  void apply_parameter(const Parameter& p);
+  std::unique_ptr<Accel> m_accel;
+  std::vector<Parameter> m_params;
+  std::vector<std::vector<float>> m_snapshots;  // value of each parameter at the last update()
+};
+
+}  // namespace limn
