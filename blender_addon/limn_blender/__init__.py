@@ -1,0 +1,73 @@
+"""limn for Blender: render (and, later, optimise) the scene with the limn differentiable renderer.
+
+Registers as a legacy add-on in Blender 3.x (bl_info) and as an extension in 4.2+
+(blender_manifest.toml). Scripts can call ``render(...)`` and ``export_scene(...)`` directly."""
+
+bl_info = {
+    "name": "limn",
+    "author": "limn developers",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "Properties > Render > limn",
+    "description": "Render and optimise geometry with the limn differentiable renderer",
+    "category": "Render",
+}
+
+import bpy
+
+from . import exporter, render_ops
+from .exporter import export_scene, write_scene
+from .render_ops import render, load_blender_scene
+
+__all__ = ["render", "export_scene", "write_scene", "load_blender_scene"]
+
+
+class LimnPreferences(bpy.types.AddonPreferences):
+    bl_idname = __package__
+
+    module_path: bpy.props.StringProperty(
+        name="limn module folder", subtype="DIR_PATH",
+        description="Folder that contains the 'limn' Python package, if it is neither bundled nor importable")
+
+    def draw(self, context):
+        self.layout.prop(self, "module_path")
+
+
+class LimnSettings(bpy.types.PropertyGroup):
+    spp: bpy.props.IntProperty(name="Samples", default=64, min=1, description="Samples per pixel")
+    seed: bpy.props.IntProperty(name="Seed", default=0, min=0)
+    max_depth: bpy.props.IntProperty(name="Max depth", default=0, min=0,
+                                     description="Longest path in segments; 0 uses Cycles' max bounces + 1")
+    image_name: bpy.props.StringProperty(name="Image", default="limn render")
+
+
+class LIMN_PT_render(bpy.types.Panel):
+    bl_label = "limn"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+
+    def draw(self, context):
+        s = context.scene.limn
+        col = self.layout.column()
+        col.prop(s, "spp")
+        col.prop(s, "seed")
+        col.prop(s, "max_depth")
+        col.prop(s, "image_name")
+        col.operator(render_ops.LIMN_OT_render.bl_idname, icon="RENDER_STILL")
+        col.operator(render_ops.LIMN_OT_export.bl_idname, icon="EXPORT")
+
+
+_classes = (LimnPreferences, LimnSettings, render_ops.LIMN_OT_render, render_ops.LIMN_OT_export, LIMN_PT_render)
+
+
+def register():
+    for c in _classes:
+        bpy.utils.register_class(c)
+    bpy.types.Scene.limn = bpy.props.PointerProperty(type=LimnSettings)
+
+
+def unregister():
+    del bpy.types.Scene.limn
+    for c in reversed(_classes):
+        bpy.utils.unregister_class(c)
