@@ -705,6 +705,11 @@ void load_integrator(Context& ctx, const json& j, const std::string& id) {
   } else if (type == "direct") {
     s.max_depth = 2;  // emitters seen directly plus one bounce
     s.rr_depth = std::numeric_limits<int>::max();
+    const int ne = p.integer("emitter_samples", 1), nb = p.integer("bsdf_samples", 1);
+    if (ne < 0 || ne > 1 || nb < 0 || nb > 1 || ne + nb == 0)
+      p.fail("emitter_samples and bsdf_samples must each be 0 or 1, not both 0 (got " + std::to_string(ne) + ", " + std::to_string(nb) + ")");
+    s.emitter_sampling = ne == 1;
+    s.bsdf_sampling = nb == 1;
   } else {
     p.fail("unknown integrator type '" + type + "' (known: path, direct)");
   }

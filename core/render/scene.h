@@ -16,6 +16,10 @@ struct IntegratorSettings {
   int max_depth = -1;         // longest path in segments (Mitsuba: 1 = emitters seen directly); -1 = unbounded
   int rr_depth = 5;           // Russian roulette from this depth on
   bool hide_emitters = false; // directly visible emitters render black
+  // Strategies combined by MIS ("direct" lets either be switched off, as Mitsuba's emitter_samples
+  // / bsdf_samples; only 0 or 1 sample per strategy is supported).
+  bool emitter_sampling = true;
+  bool bsdf_sampling = true;
 };
 
 // An editable parameter: a float view into scene memory plus what must happen when it changes.

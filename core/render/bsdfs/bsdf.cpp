@@ -143,6 +143,7 @@ std::optional<BsdfSample> sample_model(const RoughDielectric& b, const Vec3& wi,
   const float sign = wi.z > 0.0f ? 1.0f : -1.0f;
   const Vec3 m = b.distribution.sample(sign * wi, u);
   const float dot_i = glm::dot(wi, m);
+  if (dot_i * wi.z <= 0.0f) return std::nullopt;  // back-facing microfacet (full-NDF sampling)
   const DielectricFresnel fr = fresnel_dielectric(dot_i, b.eta);
   BsdfSample s;
   if (u_lobe < fr.F) {

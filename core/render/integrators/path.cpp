@@ -31,7 +31,7 @@ Spectrum estimate_direct(const Scene& scene, const SurfaceInteraction& si, const
   counters.rays++;
   if (scene.occluded(shadow)) return Spectrum(0.0f);
   const float pdf_light = es.pdf * scene.emitter_selection_pdf();
-  const float w = es.delta ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv));
+  const float w = es.delta || !scene.integrator.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv));
   return f * es.radiance * (w / pdf_light);
 }
 
@@ -54,7 +54,7 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
       for (int idx : scene.infinite_emitters) {
         const Emitter& e = scene.emitters[idx];
         const Spectrum Le = eval_infinite(e, ray.d);
-        const float w = prev_delta ? 1.0f : mis_power(prev_pdf, pdf_infinite(e, ray.d) * scene.emitter_selection_pdf());
+        const float w = prev_delta || !cfg.emitter_sampling ? 1.0f : mis_power(prev_pdf, pdf_infinite(e, ray.d) * scene.emitter_selection_pdf());
         L += beta * Le * w;
       }
       break;
@@ -63,7 +63,7 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     // Emission from an area emitter that was hit.
     if (emits_towards(scene, si, ray.d) && !(depth == 0 && cfg.hide_emitters)) {
       float w = 1.0f;
-      if (!prev_delta) {
+      if (!prev_delta && cfg.emitter_sampling) {
         const int ei = scene.shapes[si.shape].emitter;
         const float pdf_light = pdf_emitter_area(scene.emitters[ei], scene.shapes[si.shape], prev_p, si.p, si.ng) *
                                 scene.emitter_selection_pdf();
@@ -79,7 +79,9 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     const Bsdf& bsdf = scene.bsdfs[shape.bsdf];
     const Vec3 wi_local = si.frame.to_local(-ray.d);
 
-    if (!bsdf.is_delta() && !scene.emitters.empty()) L += beta * estimate_direct(scene, si, bsdf, wi_local, rng, counters);
+    if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty())
+      L += beta * estimate_direct(scene, si, bsdf, wi_local, rng, counters);
+    if (!cfg.bsdf_sampling) break;
 
     const float u_lobe = rng.next_float();
     const auto bs = bsdf.sample(wi_local, u_lobe, rng.next_2d(), si.uv);
