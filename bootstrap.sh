@@ -11,6 +11,10 @@ WITH_BPY=0
 BPY_VERSION=4.5.15   # newest Blender LTS on PyPI with wheels for CPython 3.11 (Debian 12's Python)
 
 say() { printf '\033[1m[bootstrap]\033[0m %s\n' "$*"; }
+# Runs a command quietly; on failure prints its whole output and stops.
+LOG=$(mktemp)
+trap 'rm -f "$LOG"' EXIT
+quiet() { "$@" >"$LOG" 2>&1 || { cat "$LOG"; say "failed: $*"; exit 1; }; }
 
 # --- 1. Debian packages --------------------------------------------------------------------------
 PACKAGES=(build-essential cmake ninja-build pkg-config libembree-dev libopenimageio-dev openimageio-tools
@@ -33,19 +37,19 @@ if [ ! -x .venv/bin/python ]; then
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
 PY="$ROOT/.venv/bin/python"
-"$PY" -m pip install -q --upgrade "scikit-build-core>=0.8" "pybind11>=2.10" >/dev/null
+quiet "$PY" -m pip install -q --upgrade "scikit-build-core>=0.8" "pybind11>=2.10"
 if [ "$WITH_BPY" = 1 ] && ! "$PY" -c "import bpy, sys; sys.exit(0 if bpy.app.version_string.startswith('${BPY_VERSION%.*}') else 1)" 2>/dev/null; then
   say "installing bpy==$BPY_VERSION (Blender as a Python module) into .venv"
-  "$PY" -m pip install -q "bpy==$BPY_VERSION"
+  quiet "$PY" -m pip install -q "bpy==$BPY_VERSION"
 fi
 
 # --- 3. Build: the Python package (scikit-build-core) and the doctest suite -----------------------
 say "building the limn Python package"
-"$PY" -m pip install -q --no-build-isolation --no-deps .
-cmake -S . -B build/cpp -G Ninja -DCMAKE_BUILD_TYPE=Release -DLIMN_TESTS=ON -DLIMN_PYTHON=OFF >/dev/null
+quiet "$PY" -m pip install -q --no-build-isolation --no-deps .
+quiet cmake -S . -B build/cpp -G Ninja -DCMAKE_BUILD_TYPE=Release -DLIMN_TESTS=ON -DLIMN_PYTHON=OFF
 say "building the C++ tests"
-ninja -C build/cpp limn_tests >/dev/null
+quiet ninja -C build/cpp limn_tests
 
 # --- 4. Blender add-on bundle with the compiled module inside (build/addon, build/limn_blender.zip) -
-"$PY" blender_addon/package.py --out build >/dev/null
+quiet "$PY" blender_addon/package.py --out build
 say "ready: .venv (limn $("$PY" -c 'import limn; print(limn.__version__)')), build/cpp/limn_tests, build/addon/limn_blender"

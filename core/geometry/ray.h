@@ -30,7 +30,10 @@ struct SurfaceInteraction {
 // Origin offset past the rounding error of p along the geometric normal, on the side of w
 // (pbrt-v4's OffsetRayOrigin idea): a ray leaving there cannot re-hit the same surface point.
 inline Vec3 offset_ray_origin(const Vec3& p, const Vec3& p_error, const Vec3& ng, const Vec3& w) {
-  const float d = glm::dot(glm::abs(ng), p_error);
+  // p_error bounds our reconstruction of p; Embree's intersection of the new ray also rounds, by a
+  // few ulps of the coordinates' magnitude (2^-20 |p| is about 8 ulps). Without that term a hit that
+  // is exact (e.g. on the plane z = 0) would get no offset and re-hit its own triangle at t = 0.
+  const float d = glm::dot(glm::abs(ng), p_error) + 0x1p-20f * max_component(glm::abs(p));
   Vec3 offset = d * ng;
   if (glm::dot(w, ng) < 0.0f) offset = -offset;
   Vec3 po = p + offset;

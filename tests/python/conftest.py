@@ -1,0 +1,42 @@
+"""Shared helpers for the Python tests: small scene dictionaries and image statistics."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENES = os.path.join(ROOT, "scenes")
+
+
+def camera(origin, target, up=(0, 0, 1), fov=40.0, width=32, height=32, spp=16):
+    return {"type": "perspective", "fov": fov,
+            "to_world": {"look_at": {"origin": list(origin), "target": list(target), "up": list(up)}},
+            "film": {"type": "hdrfilm", "width": width, "height": height},
+            "sampler": {"type": "independent", "sample_count": spp}}
+
+
+def sphere_over_plane(width=32, height=32, spp=16):
+    return {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 4},
+        "sensor": camera((0, -4, 2), (0, 0, 0.5), width=width, height=height, spp=spp),
+        "floor": {"type": "rectangle", "to_world": {"scale": 3}, "bsdf": {"type": "diffuse", "reflectance": 0.5}},
+        "ball": {"type": "sphere", "center": [0, 0, 0.7], "radius": 0.6,
+                 "bsdf": {"type": "diffuse", "reflectance": [0.8, 0.3, 0.2]}},
+        "light": {"type": "rectangle",
+                  "to_world": [{"scale": 0.5}, {"rotate": {"axis": [1, 0, 0], "angle": 180}}, {"translate": [0.5, -0.5, 3]}],
+                  "emitter": {"type": "area", "radiance": 20.0}},
+        "sky": {"type": "constant", "radiance": 0.1},
+    }
+
+
+def mean_and_stderr(samples: np.ndarray):
+    samples = np.asarray(samples, dtype=np.float64)
+    return samples.mean(), samples.std(ddof=1) / np.sqrt(samples.size)
+
+
+@pytest.fixture
+def scene_dict():
+    return sphere_over_plane()
