@@ -40,3 +40,24 @@ def mean_and_stderr(samples: np.ndarray):
 @pytest.fixture
 def scene_dict():
     return sphere_over_plane()
+
+
+def pixel_rays(origin, target, up, fov_x_deg, width, height, offsets=((0.5, 0.5),)):
+    """Ray directions through pixel positions, written out from docs/scene-format.md's camera model
+    (an independent check of the camera): camera +z looks at the target, +y is up, +x is image left."""
+    origin, target, up = (np.asarray(v, dtype=np.float64) for v in (origin, target, up))
+    fwd = target - origin
+    fwd /= np.linalg.norm(fwd)
+    left = np.cross(up, fwd)
+    left /= np.linalg.norm(left)
+    cam_up = np.cross(fwd, left)
+    tx = np.tan(np.radians(fov_x_deg) / 2)
+    ty = tx * height / width
+    out = []
+    for ox, oy in offsets:
+        x = (np.arange(width) + ox) / width
+        y = (np.arange(height) + oy) / height
+        X, Y = np.meshgrid(x, y)
+        d = ((1 - 2 * X)[..., None] * tx * left + (1 - 2 * Y)[..., None] * ty * cam_up + fwd)
+        out.append(d / np.linalg.norm(d, axis=-1, keepdims=True))
+    return out
