@@ -572,7 +572,8 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
   for (const auto& [key, child] : p.children()) {
     const std::string ctype = type_of(*child);
     auto cat = known_types().find(ctype);
-    if (cat == known_types().end()) p.fail("unknown nested object type '" + ctype + "' under '" + key + "'");
+    if (cat == known_types().end())
+      p.fail("unknown type '" + ctype + "' under '" + key + "' (known: bsdfs " + known_of(Category::Bsdf) + "; emitter area; ref)");
     p.mark_used(key);
     if (cat->second == Category::Ref) {
       const std::string ref = child->value("id", "");
