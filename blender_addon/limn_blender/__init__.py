@@ -37,7 +37,7 @@ class LimnSettings(bpy.types.PropertyGroup):
     spp: bpy.props.IntProperty(name="Samples", default=64, min=1, description="Samples per pixel")
     seed: bpy.props.IntProperty(name="Seed", default=0, min=0)
     max_depth: bpy.props.IntProperty(name="Max depth", default=0, min=0,
-                                     description="Longest path in segments; 0 uses Cycles' max bounces + 1")
+                                     description="Longest path in segments; 0 uses Cycles' max bounces + 2")
     image_name: bpy.props.StringProperty(name="Image", default="limn render")
 
 

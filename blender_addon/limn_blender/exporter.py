@@ -226,10 +226,11 @@ def _export_light(obj, world, desc, warnings, used_ids):
             sx, sy = sx * math.sqrt(math.pi) / 2.0, sy * math.sqrt(math.pi) / 2.0
         m = world @ np.diag([sx / 2.0, sy / 2.0, 1.0, 1.0]) @ _RECT_FLIP
         area = 4.0 * np.linalg.norm(np.cross(m[:3, 0], m[:3, 1]))
-        # Lambertian emitter of power P over area A: L = P / (pi A).
+        # Blender's area-light power P gives radiance P / (4 A) in Cycles (measured against Cycles:
+        # see docs/blender.md), not the P / (pi A) of a Lambertian emitter of radiant power P.
         desc[sid] = {"type": "rectangle", "to_world": _rows(m),
                      "bsdf": {"type": "diffuse", "reflectance": 0.0},
-                     "emitter": {"type": "area", "radiance": list(colour * light.energy / (math.pi * area))}}
+                     "emitter": {"type": "area", "radiance": list(colour * light.energy / (4.0 * area))}}
     else:
         warnings.append(f"light '{obj.name}': {light.type.lower()} lights are not supported; skipped")
 
@@ -292,7 +293,8 @@ def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | Non
     desc: dict = {"type": "scene"}
     if max_depth is None:
         cycles = getattr(scene, "cycles", None)
-        max_depth = int(cycles.max_bounces) + 1 if cycles is not None else 8
+        # Cycles' max_bounces = 0 is direct lighting, i.e. paths of 2 segments in limn's max_depth.
+        max_depth = int(cycles.max_bounces) + 2 if cycles is not None else 8
     desc["integrator"] = {"type": "path", "max_depth": int(max_depth)}
     _export_camera(scene, desc, spp)
     used_ids = {"type", "integrator", "sensor", "world"}

@@ -54,3 +54,61 @@ def build_sphere_over_plane(width=64, height=48):
     bg.inputs["Strength"].default_value = 1.0
     scene.world = world
     return scene
+
+
+def _diffuse(name, colour):
+    """A material whose surface is a plain Diffuse BSDF node (the same model in Cycles and limn)."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    for n in list(nodes):
+        if n.type != "OUTPUT_MATERIAL":
+            nodes.remove(n)
+    out = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    diffuse = nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (*colour, 1.0)
+    links.new(diffuse.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def build_cornell(size=256, max_depth=8):
+    """A Cornell box with a sphere and a box, diffuse materials and one area light (the scene of
+    the Cycles comparison in docs/performance.md)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+    white, red, green = (_diffuse("white", (0.725, 0.71, 0.68)), _diffuse("red", (0.63, 0.065, 0.05)),
+                         _diffuse("green", (0.14, 0.45, 0.091)))
+    walls = {"floor": ((0, 0, -1), (0, 0, 0), white), "ceiling": ((0, 0, 1), (math.pi, 0, 0), white),
+             "back": ((0, 1, 0), (math.pi / 2, 0, 0), white), "left": ((-1, 0, 0), (0, math.pi / 2, 0), red),
+             "right": ((1, 0, 0), (0, -math.pi / 2, 0), green)}
+    for name, (loc, rot, mat) in walls.items():
+        bpy.ops.mesh.primitive_plane_add(size=2.0, location=loc, rotation=rot)
+        obj = bpy.context.active_object
+        obj.name = name
+        obj.data.materials.append(mat)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32, radius=0.4, location=(-0.4, 0.3, -0.6))
+    ball = bpy.context.active_object
+    ball.name = "ball"
+    bpy.ops.object.shade_smooth()
+    ball.data.materials.append(white)
+    bpy.ops.mesh.primitive_cube_add(size=0.6, location=(0.45, -0.1, -0.7), rotation=(0, 0, math.radians(20)))
+    box = bpy.context.active_object
+    box.name = "box"
+    box.data.materials.append(white)
+    bpy.ops.object.light_add(type="AREA", location=(0, 0, 0.98))
+    lamp = bpy.context.active_object
+    lamp.name = "lamp"
+    lamp.data.size = 0.5
+    lamp.data.energy = 30.0
+    bpy.ops.object.camera_add(location=(0, -3.9, 0), rotation=(math.pi / 2, 0, 0))
+    cam = bpy.context.active_object
+    cam.data.sensor_fit = "HORIZONTAL"
+    cam.data.angle = math.radians(39.3077)
+    scene.camera = cam
+    scene.world = None
+    cycles = scene.cycles
+    # Cycles' bounces are limn's max_depth - 2 (max_bounces = 0 is direct lighting).
+    cycles.max_bounces = cycles.diffuse_bounces = cycles.glossy_bounces = cycles.transmission_bounces = max_depth - 2
+    return scene

@@ -51,7 +51,7 @@ def test_export_contents(addon):
     assert desc["ball"]["face_normals"] is False            # shade_smooth
     np.testing.assert_allclose(desc["ball"]["vertex_positions"].mean(0), [0, 0, 1.0], atol=1e-5)
     radiance = desc["lamp"]["emitter"]["radiance"]
-    assert radiance[0] == pytest.approx(400.0 / (math.pi * 1.5 ** 2))
+    assert radiance[0] == pytest.approx(400.0 / (4 * 1.5 ** 2))  # Cycles' convention, docs/blender.md
     assert desc["ball"]["bsdf"]["bsdf"]["reflectance"][:3] == pytest.approx([0.8, 0.2, 0.1])
     assert desc["world"]["radiance"] == pytest.approx([0.05, 0.06, 0.08])
     assert warnings == []
@@ -93,7 +93,7 @@ def test_render_matches_a_hand_written_scene(addon, limn):
         "lamp": {"type": "rectangle",
                  "to_world": [{"scale": [0.75, 0.75, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 180}}, {"translate": [1, -1, 4]}],
                  "bsdf": {"type": "diffuse", "reflectance": 0.0},
-                 "emitter": {"type": "area", "radiance": 400.0 / (math.pi * 1.5 ** 2)}},
+                 "emitter": {"type": "area", "radiance": 400.0 / (4 * 1.5 ** 2)}},
         "world": {"type": "constant", "radiance": [0.05, 0.06, 0.08]},
     }
     reference = limn.load_dict(hand).render(spp=64, seed=4)
