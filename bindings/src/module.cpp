@@ -77,6 +77,7 @@ py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int thr
     if (callback_error) std::rethrow_exception(callback_error);
     throw;
   }
+  if (callback_error) std::rethrow_exception(callback_error);  // e.g. Ctrl-C seen at the final call
   py::dict s;
   s["seconds"] = stats.seconds;
   s["samples"] = stats.samples;

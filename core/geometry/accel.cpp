@@ -65,8 +65,10 @@ namespace {
 void sphere_bounds(const RTCBoundsFunctionArguments* args) {
   const Sphere& s = *static_cast<const Sphere*>(args->geometryUserPtr);
   RTCBounds* b = args->bounds_o;
-  b->lower_x = s.center.x - s.radius; b->lower_y = s.center.y - s.radius; b->lower_z = s.center.z - s.radius;
-  b->upper_x = s.center.x + s.radius; b->upper_y = s.center.y + s.radius; b->upper_z = s.center.z + s.radius;
+  // Widened by a few ulps: the box is rounded to float, the intersector works in double.
+  const float r = s.radius * (1.0f + 1e-6f) + 1e-6f * max_component(glm::abs(s.center));
+  b->lower_x = s.center.x - r; b->lower_y = s.center.y - r; b->lower_z = s.center.z - r;
+  b->upper_x = s.center.x + r; b->upper_y = s.center.y + r; b->upper_z = s.center.z + r;
 }
 
 Ray ray_from_n(RTCRayN* ray, unsigned N, unsigned i) {
@@ -146,8 +148,14 @@ Accel::Accel(std::vector<Shape>& shapes) : m_shapes(shapes) {
     rtcAttachGeometryByID(m_scene, g, unsigned(i));  // geomID == shape index
     m_geoms.push_back(g);
   }
-  commit();
-  EmbreeDevice::check("building the acceleration structure");
+  try {
+    commit();
+    EmbreeDevice::check("building the acceleration structure");
+  } catch (...) {
+    for (RTCGeometry g : m_geoms) rtcReleaseGeometry(g);
+    rtcReleaseScene(m_scene);
+    throw;
+  }
 }
 
 Accel::~Accel() {

@@ -23,7 +23,8 @@ std::string lower_extension(const std::string& path) {
 }  // namespace
 
 Bitmap read_image(const std::string& path, bool raw) {
-  if (!std::filesystem::exists(path)) throw std::invalid_argument("image file '" + path + "' not found");
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw std::invalid_argument("image file '" + path + "' not found");
   auto in = OIIO::ImageInput::open(path);
   if (!in) throw std::invalid_argument("cannot read image '" + path + "': " + OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();

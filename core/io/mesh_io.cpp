@@ -10,7 +10,8 @@
 namespace limn {
 
 MeshData read_mesh_file(const std::string& path) {
-  if (!std::filesystem::exists(path)) throw std::invalid_argument("mesh file '" + path + "' not found");
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw std::invalid_argument("mesh file '" + path + "' not found");
   Assimp::Importer importer;
   // Triangulate polygons; keep positions exactly as stored (welding happens later, by position).
   const aiScene* scene = importer.ReadFile(path, aiProcess_Triangulate);

@@ -14,6 +14,14 @@ namespace {
 
 using json = nlohmann::json;
 
+// j[key] if it is a string, else `def`; wrong types are reported by the caller's checks, never as
+// nlohmann exceptions.
+std::string str_field(const json& j, const char* key, const std::string& def) {
+  if (!j.is_object()) return def;
+  auto it = j.find(key);
+  return it != j.end() && it->is_string() ? it->get<std::string>() : def;
+}
+
 enum class Category { Scene, Sensor, Film, Sampler, Filter, Integrator, Shape, Bsdf, Emitter, Texture, Ref };
 
 const std::map<std::string, Category>& known_types() {
@@ -74,14 +82,17 @@ class Props {
     const json& v = raw(k);
     if (!v.is_number()) fail("'" + k + "' must be a number (got " + v.dump() + ")");
     const double d = v.get<double>();
-    if (!std::isfinite(d)) fail("'" + k + "' must be finite (got " + v.dump() + ")");
+    if (!std::isfinite(d) || !std::isfinite(float(d)) || std::abs(d) > 3.0e38)
+      fail("'" + k + "' must be a finite float (got " + v.dump() + ")");
     return float(d);
   }
   int integer(const std::string& k, int def) const {
     if (!has(k)) return def;
     const json& v = raw(k);
     if (!v.is_number_integer()) fail("'" + k + "' must be an integer (got " + v.dump() + ")");
-    return v.get<int>();
+    const int64_t i = v.get<int64_t>();
+    if (i < -(int64_t(1) << 30) || i > (int64_t(1) << 30)) fail("'" + k + "' is out of range (got " + v.dump() + ")");
+    return int(i);
   }
   bool boolean(const std::string& k, bool def) const {
     if (!has(k)) return def;
@@ -104,7 +115,8 @@ class Props {
     const std::string name = required_string(k);
     std::filesystem::path p(name);
     if (p.is_relative()) p = m_ctx.base_dir / p;
-    if (!std::filesystem::exists(p)) fail("file '" + name + "' not found (looked for " + p.string() + ")");
+    std::error_code ec;
+    if (!std::filesystem::exists(p, ec)) fail("file '" + name + "' not found (looked for " + p.string() + ")");
     return p.string();
   }
 
@@ -112,13 +124,13 @@ class Props {
     if (v.is_object() && v.contains("__limn_array__")) {
       const ArrayData& a = array_ref(v, k);
       if (a.values.size() != n) fail("'" + k + "' must have " + std::to_string(n) + " values (got " + std::to_string(a.values.size()) + ")");
-      for (double d : a.values) if (!std::isfinite(d)) fail("'" + k + "' has a non-finite entry");
+      for (double d : a.values) if (!(std::abs(d) <= 3.0e38)) fail("'" + k + "' has a non-finite entry");
       return a.values;
     }
     if (!v.is_array() || v.size() != n) fail("'" + k + "' must be a list of " + std::to_string(n) + " numbers (got " + v.dump() + ")");
     std::vector<double> out;
     for (const json& e : v) {
-      if (!e.is_number() || !std::isfinite(e.get<double>())) fail("'" + k + "' must contain finite numbers (got " + v.dump() + ")");
+      if (!e.is_number() || !(std::abs(e.get<double>()) <= 3.0e38)) fail("'" + k + "' must contain finite float numbers (got " + v.dump() + ")");
       out.push_back(e.get<double>());
     }
     return out;
@@ -135,13 +147,13 @@ class Props {
   }
   Spectrum spectrum_value(const json& v0, const std::string& k) const {
     const json* v = &v0;
-    if (v->is_object() && v->value("type", "") == "rgb") {
+    if (v->is_object() && str_field(*v, "type", "") == "rgb") {
       if (!v->contains("value")) fail("'" + k + "': rgb needs a 'value'");
       v = &v->at("value");
     }
     Spectrum s;
     if (v->is_number()) s = Spectrum(v->get<float>());
-    else if (v->is_object() && v->contains("type")) fail("'" + k + "' must be a colour (number, [r, g, b] or rgb), not a '" + v->value("type", "") + "'");
+    else if (v->is_object() && v->contains("type")) fail("'" + k + "' must be a colour (number, [r, g, b] or rgb), not " + v->dump());
     else {
       const auto n = numbers(*v, k, 3);
       s = Spectrum(float(n[0]), float(n[1]), float(n[2]));
@@ -155,7 +167,7 @@ class Props {
     t.value = def;
     if (!has(k)) return t;
     const json& v = raw(k);
-    if (v.is_object() && v.value("type", "") == "bitmap") {
+    if (v.is_object() && str_field(v, "type", "") == "bitmap") {
       Props bp(m_ctx, v, m_what + ": texture '" + k + "' (bitmap)");
       const std::string path = bp.file("filename");
       try {
@@ -196,6 +208,9 @@ class Props {
       }
     };
     walk(v, 0);
+    size_t count = 1;
+    for (size_t n : a.shape) count *= n;
+    if (count != a.values.size()) fail("'" + k + "' is a ragged array");
     return a;
   }
 
@@ -283,6 +298,7 @@ class Props {
 };
 
 std::string type_of(const json& j) { return j.at("type").get<std::string>(); }
+
 
 std::string describe(const std::string& kind, const std::string& id, const std::string& type) {
   return kind + " '" + id + "' (" + type + ")";
@@ -408,11 +424,12 @@ void check_similarity(const Props& p, const Transform& t, float& scale) {
   const double tol = 1e-5 * std::max(sx, std::max(sy, sz));
   if (std::abs(sx - sy) > tol || std::abs(sx - sz) > tol || std::abs(glm::dot(Vec3d(m[0]), Vec3d(m[1]))) > tol * sx ||
       std::abs(glm::dot(Vec3d(m[0]), Vec3d(m[2]))) > tol * sx || std::abs(glm::dot(Vec3d(m[1]), Vec3d(m[2]))) > tol * sx)
-    p.fail("to_world of a sphere must be a rotation, uniform scale and translation");
+    p.fail("to_world must be a rotation, uniform scale and translation");
   scale = float(sx);
 }
 
 Mesh build_mesh(const Props& p, MeshData data, const Transform& to_world, bool face_normals) {
+  if (data.indices.size() % 3 != 0 || data.positions.size() % 3 != 0) p.fail("mesh buffers are not triangles of 3D points");
   const size_t nv = data.positions.size() / 3;
   for (size_t v = 0; v < nv; ++v)
     for (int c = 0; c < 3; ++c)
@@ -432,6 +449,7 @@ Mesh build_mesh(const Props& p, MeshData data, const Transform& to_world, bool f
   m.corner_uvs = std::move(data.corner_uvs);
   for (size_t v = 0; v < m.positions.size(); v += 3) {
     const Vec3 q = to_world.point(Vec3(m.positions[v], m.positions[v + 1], m.positions[v + 2]));
+    if (!is_finite(q)) p.fail("vertex " + std::to_string(v / 3) + " is not finite after applying to_world");
     m.positions[v] = q.x; m.positions[v + 1] = q.y; m.positions[v + 2] = q.z;
   }
   // A mirroring transform reverses the winding; swap two corners so normals keep pointing outwards.
@@ -482,7 +500,7 @@ MeshData mesh_from_arrays(const Props& p) {
   if (f.shape.size() != 2 || f.shape[1] != 3) p.fail("'faces' must have shape (F, 3)");
   if (!f.integer) p.fail("'faces' must hold integers");
   for (double x : f.values) {
-    if (x < 0) p.fail("'faces' has a negative index (" + std::to_string(int64_t(x)) + ")");
+    if (x < 0 || x > 4294967295.0) p.fail("'faces' has an index out of range (" + std::to_string(x) + ")");
     d.indices.push_back(uint32_t(x));
   }
   if (p.has("corner_uvs")) {
@@ -525,6 +543,16 @@ int add_bsdf(Context& ctx, Bsdf b) {
   return int(ctx.scene->bsdfs.size() - 1);
 }
 
+// An explicit "id" on a nested object must be unique like the top-level ones; without one the
+// object is named after its owner.
+std::string nested_id(const Props& p, const json& child, const std::string& owner) {
+  if (!child.contains("id")) return owner;
+  if (!child.at("id").is_string()) p.fail("nested \"id\" must be a string (got " + child.at("id").dump() + ")");
+  const std::string id = child.at("id").get<std::string>();
+  if (!p.ctx().ids.insert(id).second) p.fail("duplicate id '" + id + "'");
+  return id;
+}
+
 void load_shape(Context& ctx, const json& j, const std::string& id) {
   const std::string type = type_of(j);
   Props p(ctx, j, describe("shape", id, type));
@@ -564,7 +592,11 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       p.fail("unknown shape type '" + type + "' (known: " + known_of(Category::Shape) + ")");
     }
     if (p.boolean("flip_normals", false))
-      for (size_t t = 0; t < data.indices.size(); t += 3) std::swap(data.indices[t + 1], data.indices[t + 2]);
+      for (size_t t = 0; t < data.indices.size(); t += 3) {
+        std::swap(data.indices[t + 1], data.indices[t + 2]);
+        if (!data.corner_uvs.empty())
+          for (int c = 0; c < 2; ++c) std::swap(data.corner_uvs[2 * (t + 1) + c], data.corner_uvs[2 * (t + 2) + c]);
+      }
     shape.geometry = build_mesh(p, std::move(data), to_world, face_normals);
   }
 
@@ -576,14 +608,14 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       p.fail("unknown type '" + ctype + "' under '" + key + "' (known: bsdfs " + known_of(Category::Bsdf) + "; emitter area; ref)");
     p.mark_used(key);
     if (cat->second == Category::Ref) {
-      const std::string ref = child->value("id", "");
+      const std::string ref = str_field(*child, "id", "");
       auto it = ctx.named_bsdfs.find(ref);
       if (it == ctx.named_bsdfs.end()) p.fail("'" + key + "' refers to unknown bsdf '" + ref + "'");
       if (shape.bsdf >= 0) p.fail("has more than one bsdf");
       shape.bsdf = it->second;
     } else if (cat->second == Category::Bsdf) {
       if (shape.bsdf >= 0) p.fail("has more than one bsdf");
-      shape.bsdf = add_bsdf(ctx, load_bsdf(ctx, *child, child->value("id", id)));
+      shape.bsdf = add_bsdf(ctx, load_bsdf(ctx, *child, nested_id(p, *child, id)));
     } else if (cat->second == Category::Emitter) {
       if (ctype != "area") p.fail("only 'area' emitters can be attached to a shape (got '" + ctype + "' under '" + key + "')");
       if (shape.emitter >= 0) p.fail("has more than one emitter");
@@ -592,7 +624,7 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       a.shape = int(ctx.scene->shapes.size());
       a.radiance = ep.spectrum("radiance", Spectrum(1.0f));
       ep.check_unused();
-      ctx.scene->emitters.push_back(Emitter{child->value("id", id), a});
+      ctx.scene->emitters.push_back(Emitter{nested_id(p, *child, id), a});
       shape.emitter = int(ctx.scene->emitters.size() - 1);
     } else {
       p.fail("a '" + ctype + "' cannot be nested in a shape (under '" + key + "')");
@@ -632,6 +664,8 @@ void load_emitter(Context& ctx, const json& j, const std::string& id) {
       p.fail(err.what());
     }
     env.world_from_env = p.transform("to_world");
+    float unused_scale;
+    check_similarity(p, env.world_from_env, unused_scale);  // a shear would break the 2 pi^2 sin(theta) Jacobian
     env.scale = p.number("scale", 1.0f);
     if (!(env.scale >= 0.0f)) p.fail("scale must be >= 0 (got " + std::to_string(env.scale) + ")");
     e.model = std::move(env);
@@ -719,8 +753,9 @@ void load_integrator(Context& ctx, const json& j, const std::string& id) {
 
 }  // namespace
 
-std::unique_ptr<Scene> load_scene_dict(const json& d, const std::string& source, const std::filesystem::path& base_dir,
-                                       const std::vector<ArrayData>& arrays) {
+namespace {
+std::unique_ptr<Scene> load_scene_dict_impl(const json& d, const std::string& source, const std::filesystem::path& base_dir,
+                                            const std::vector<ArrayData>& arrays) {
   auto scene = std::make_unique<Scene>();
   scene->source = source;
   Context ctx{source, base_dir, &arrays, scene.get(), {}, {}};
@@ -742,7 +777,8 @@ std::unique_ptr<Scene> load_scene_dict(const json& d, const std::string& source,
       throw std::invalid_argument(source + ": '" + it.key() + "' has unknown type '" + type + "' (known: sensors " + known_of(Category::Sensor) +
                                   "; integrators " + known_of(Category::Integrator) + "; shapes " + known_of(Category::Shape) + "; bsdfs " +
                                   known_of(Category::Bsdf) + "; emitters " + known_of(Category::Emitter) + ")");
-    const std::string id = v.value("id", it.key());
+    if (v.contains("id") && !v.at("id").is_string()) throw std::invalid_argument(source + ": '" + it.key() + "': \"id\" must be a string");
+    const std::string id = str_field(v, "id", it.key());
     if (!ctx.ids.insert(id).second) throw std::invalid_argument(source + ": duplicate id '" + id + "'");
     by_cat[int(cat->second)].emplace_back(id, &v);
   }
@@ -762,6 +798,18 @@ std::unique_ptr<Scene> load_scene_dict(const json& d, const std::string& source,
 
   scene->build();
   return scene;
+}
+}  // namespace
+
+std::unique_ptr<Scene> load_scene_dict(const json& d, const std::string& source, const std::filesystem::path& base_dir,
+                                       const std::vector<ArrayData>& arrays) {
+  try {
+    return load_scene_dict_impl(d, source, base_dir, arrays);
+  } catch (const json::exception& e) {  // a wrong JSON type that a check above did not anticipate
+    throw std::invalid_argument(source + ": malformed scene description: " + e.what());
+  } catch (const std::filesystem::filesystem_error& e) {
+    throw std::invalid_argument(source + ": " + e.what());
+  }
 }
 
 std::unique_ptr<Scene> load_scene_file(const std::string& path) {

@@ -43,7 +43,9 @@ class Distribution1D {
     du = std::clamp(du, 0.0, 1.0 - 1e-7);  // keep x strictly inside bin i
     if (bin) *bin = i;
     if (pdf_out) *pdf_out = pmf(i) * float(m_func.size());
-    return float((double(i) + du) / double(m_func.size()));
+    // Stay inside bin i after rounding to float.
+    const float x = float((double(i) + du) / double(m_func.size()));
+    return std::min(x, std::nextafter(float(double(i + 1) / double(m_func.size())), 0.0f));
   }
   size_t sample_discrete(float u) const {
     // First i with cdf[i+1] > u, skipping empty bins.

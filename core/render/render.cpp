@@ -12,6 +12,7 @@ namespace limn {
 
 Image render(const Scene& scene, const RenderOptions& options, RenderStats* stats) {
   const auto start = std::chrono::steady_clock::now();
+  const auto lock = scene.render_lock();
   const int W = scene.camera.width, H = scene.camera.height;
   const int spp = options.spp > 0 ? options.spp : scene.spp;
   if (spp <= 0) throw std::invalid_argument("spp must be > 0 (got " + std::to_string(spp) + ")");

@@ -1,6 +1,7 @@
 #include "core/render/scene.h"
 
 #include <cstring>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 
@@ -125,6 +126,11 @@ std::vector<std::string> Scene::update() {
   std::vector<size_t> changed;
   for (size_t i = 0; i < m_params.size(); ++i)
     if (std::memcmp(m_params[i].data, m_snapshots[i].data(), m_snapshots[i].size() * sizeof(float)) != 0) changed.push_back(i);
+  if (changed.empty()) return {};
+  std::unique_lock<std::shared_mutex> lock(m_mutex, std::try_to_lock);
+  if (!lock.owns_lock())
+    throw std::runtime_error(source + ": update(): parameters changed while a render of this scene is running; "
+                             "edit parameters only between renders");
   // Validate everything first, so a bad value leaves the whole scene as it was.
   for (size_t i : changed) {
     try {

@@ -2,6 +2,7 @@
 // acceleration structure, and the table of parameters users may edit between renders.
 #pragma once
 #include <memory>
+#include <shared_mutex>
 #include <string>
 #include <vector>
 #include "core/geometry/accel.h"
@@ -62,6 +63,10 @@ class Scene {
   // refits geometry that moved and recomputes derived state. Returns the names that changed.
   std::vector<std::string> update();
 
+  // Held (shared) by every render for its whole duration; update() needs it exclusively and throws
+  // std::runtime_error instead of waiting when a render runs in another thread.
+  std::shared_lock<std::shared_mutex> render_lock() const { return std::shared_lock<std::shared_mutex>(m_mutex); }
+
   // Probability of choosing emitter i for next-event estimation (uniform selection).
   float emitter_selection_pdf() const { return emitters.empty() ? 0.0f : 1.0f / float(emitters.size()); }
 
@@ -70,6 +75,7 @@ class Scene {
   void validate_parameter(const Parameter& p) const;
   void apply_parameter(const Parameter& p);
   std::unique_ptr<Accel> m_accel;
+  mutable std::shared_mutex m_mutex;
   std::vector<Parameter> m_params;
   std::vector<std::vector<float>> m_snapshots;  // value of each parameter at the last update()
 };

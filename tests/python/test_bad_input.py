@@ -184,3 +184,56 @@ def test_nothing_crashes_on_random_garbage():
             limn.load_dict(d).render(spp=1)
         except ValueError as e:
             assert obj in str(e) or key in str(e), str(e)
+
+
+def test_ragged_and_mistyped_values():
+    d = sphere_over_plane()
+    d["tri"] = {"type": "mesh", "vertex_positions": [[0, 0, 1], [1, 0, 1], [0, 1, 1]], "faces": [0, [1, 2, 3]]}
+    expect(lambda: limn.load_dict(d), "shape 'tri' (mesh)", "ragged")
+    d = sphere_over_plane()
+    d["floor"]["id"] = 5
+    expect(lambda: limn.load_dict(d), "'floor'", "\"id\" must be a string")
+    d = sphere_over_plane()
+    d["light"]["emitter"]["radiance"] = {"type": 3}
+    expect(lambda: limn.load_dict(d), "emitter 'light' (area)", "radiance")
+    d = sphere_over_plane()
+    d["ball"]["radius"] = 1e300
+    expect(lambda: limn.load_dict(d), "shape 'ball' (sphere)", "finite float")
+    d = sphere_over_plane()
+    d["sensor"]["film"]["width"] = 4294967552
+    expect(lambda: limn.load_dict(d), "'width' is out of range")
+    d = sphere_over_plane()
+    d["ball"]["bsdf"] = {"type": "diffuse", "id": "shared"}
+    d["floor"]["bsdf"] = {"type": "diffuse", "id": "shared"}
+    expect(lambda: limn.load_dict(d), "duplicate id 'shared'")
+
+
+def test_envmap_transform_must_be_a_rotation(tmp_path):
+    limn.write_image(tmp_path / "env.exr", np.ones((4, 8, 3), np.float32))
+    d = sphere_over_plane()
+    d["sky"] = {"type": "envmap", "filename": "env.exr", "to_world": {"scale": [1, 2, 1]}}
+    expect(lambda: limn.load_dict(d, base_dir=tmp_path), "emitter 'sky' (envmap)", "rotation")
+
+
+def test_update_during_a_render_is_refused():
+    import threading
+    scene = limn.load_dict(sphere_over_plane())
+    entered, release, errors = threading.Event(), threading.Event(), []
+
+    def progress(_):
+        entered.set()
+        release.wait(10)
+
+    worker = threading.Thread(target=lambda: scene.render(progress=progress))
+    worker.start()
+    assert entered.wait(10)
+    scene.params["ball.radius"] = 0.3
+    try:
+        scene.update()
+    except RuntimeError as e:
+        errors.append(str(e))
+    finally:
+        release.set()
+        worker.join()
+    assert errors and "while a render of this scene is running" in errors[0]
+    assert scene.update() == ["ball.radius"]  # applied once the render is over

@@ -95,9 +95,11 @@ EmitterSample sample_emitter(const Emitter& e, const std::vector<Shape>& shapes,
     } else if constexpr (std::is_same_v<T, EnvmapEmitter>) {
       float pdf = 0.0f;
       s.wi = m.sample(u, &pdf);
-      if (!(pdf > 0.0f)) return;
+      // Density and radiance from the same texel lookup of wi (rounding can move a sample that sat
+      // on a texel edge into the neighbour; pdf and value must then both be the neighbour's).
+      s.pdf = m.pdf_solid_angle(s.wi);
+      if (!(pdf > 0.0f) || !(s.pdf > 0.0f)) return;
       s.to_infinity = true;
-      s.pdf = pdf;
       s.radiance = m.eval(s.wi);
     }
   }, e.model);

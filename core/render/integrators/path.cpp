@@ -39,6 +39,7 @@ Spectrum estimate_direct(const Scene& scene, const SurfaceInteraction& si, const
 
 Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, PathCounters& counters) {
   const IntegratorSettings& cfg = scene.integrator;
+  if (cfg.max_depth == 0) return Spectrum(0.0f);  // Mitsuba: no segments, no light
   Spectrum L(0.0f), beta(1.0f);
   Ray ray = camera_ray;
   float prev_pdf = 0.0f;    // solid-angle pdf of the BSDF sample that produced `ray`
