@@ -148,7 +148,8 @@ def main() -> int:
         f"In the {eq[1]:.2f} s Cycles took for {eq[0]} spp, limn renders {eq[3]} spp ({eq[4]:.2f} s): "
         f"RMSE {eq[5]:.4f} against Cycles' {eq[2]:.4f}.",
         "limn draws independent random samples; Cycles uses stratified (progressive multi-jittered) samples, "
-        "which lowers its error per sample on smooth diffuse lighting.", "",
+        "which lowers its error per sample on smooth diffuse lighting. Each RMSE includes the noise of its "
+        f"reference, which is larger for Cycles' (only {args.reference_spp // 4} spp).", "",
         "### Do the two renderers agree?", "",
         "Sum of Cycles' converged image over limn's, per channel, over the pixels that do not see the lamp "
         "(1 is perfect agreement of light units, materials and bounce counts): " + ", ".join(f"{r:.3f}" for r in ratio) + ".",
