@@ -13,6 +13,7 @@ from . import _core
 from ._core import RenderCancelled
 from .scene import Parameters, Scene, load, load_dict
 from .images import read_image, write_image, write_ply
+from .fd import fd
 
 __version__ = "0.1.0"
-__all__ = ["Scene", "Parameters", "load", "load_dict", "read_image", "write_image", "write_ply", "RenderCancelled"]
+__all__ = ["Scene", "Parameters", "load", "load_dict", "read_image", "write_image", "write_ply", "fd", "RenderCancelled"]

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import collections.abc
+import hashlib
 import json
 import os
 import warnings
@@ -50,8 +51,10 @@ class Parameters(collections.abc.MutableMapping):
 class Scene:
     """A loaded scene. Create with :func:`load` or :func:`load_dict`."""
 
-    def __init__(self, native: _core.Scene):
+    def __init__(self, native: _core.Scene, fingerprint: bytes = b""):
         self._native = native
+        self._fingerprint = fingerprint  # what the scene was made from (for finite-difference caches)
+        self._differentiable: list[str] = []
         self.params = Parameters(native)
         self.last_stats: dict = {}
         for message in native.warnings:
@@ -97,6 +100,84 @@ class Scene:
                           stacklevel=2)
         return image
 
+    # ---- derivatives --------------------------------------------------------------------------------
+    def set_differentiable(self, names) -> None:
+        """Mark parameters (names as in ``params``) as differentiable for render_forward/backward."""
+        names = [names] if isinstance(names, str) else list(names)
+        known = set(self.params)
+        for n in names:
+            if n not in known:
+                raise ValueError(f"{self._native.source}: unknown parameter '{n}' (parameters: {', '.join(sorted(known))})")
+        self._differentiable = list(dict.fromkeys(names))
+
+    @property
+    def differentiable(self) -> list[str]:
+        return list(self._differentiable)
+
+    def _diff_options(self, spp, spp_interior, spp_primary, spp_boundary, guiding, seed):
+        if not self._differentiable:
+            raise ValueError(f"{self._native.source}: no differentiable parameters; call set_differentiable() first")
+        if guiding != "none":
+            raise ValueError(f"guiding '{guiding}' is not implemented yet (only 'none')")
+        if seed < 0:
+            raise ValueError(f"seed must be >= 0 (got {seed})")
+        interior = spp_interior if spp_interior is not None else (spp or 0)
+        for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
+            if v < 0:
+                raise ValueError(f"{name} must be >= 0 (got {v})")
+        self.update()
+        return interior, spp_primary, spp_boundary
+
+    def _report(self, stats: dict) -> None:
+        self.last_stats = stats
+        if stats["invalid_paths"]:
+            warnings.warn(f"{self._native.source}: {stats['invalid_paths']} paths with non-finite values or derivatives were dropped",
+                          stacklevel=3)
+        for line in stats["summary"]:
+            if "NOT COMPUTED" in line:
+                warnings.warn(f"{self._native.source}: {line}", stacklevel=3)
+
+    def render_forward(self, tangents: dict, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
+                       spp_primary: int = 0, spp_boundary: int = 0, guiding: str = "none", threads: int = 0,
+                       progress=None) -> np.ndarray:
+        """Derivative image d(image)/d(theta) along ``tangents`` ({name: array shaped like the
+        parameter}; differentiable parameters that are not listed get a zero tangent).
+
+        Only the interior term is implemented: derivatives caused by visibility changes (silhouettes,
+        shadow edges) are missing, and a warning says so when differentiable geometry could cause them.
+        ``last_stats["summary"]`` lists what was computed and what was skipped."""
+        interior, primary, boundary = self._diff_options(spp, spp_interior, spp_primary, spp_boundary, guiding, seed)
+        for n in tangents:
+            if n not in self._differentiable:
+                raise ValueError(f"tangent given for '{n}', which is not differentiable (differentiable: {self._differentiable})")
+        arrays = []
+        for n in self._differentiable:
+            shape = self.params[n].shape
+            t = np.asarray(tangents.get(n, np.zeros(shape)), dtype=np.float64)
+            if t.shape != shape:
+                raise ValueError(f"tangent of '{n}': expected shape {shape}, got {t.shape}")
+            if not np.isfinite(t).all():
+                raise ValueError(f"tangent of '{n}' has non-finite values")
+            arrays.append(np.ascontiguousarray(t))
+        image, stats = self._native.render_forward(self._differentiable, arrays, interior, primary, boundary, seed, threads, progress)
+        self._report(stats)
+        return image
+
+    def render_backward(self, adjoint, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
+                        spp_primary: int = 0, spp_boundary: int = 0, guiding: str = "none", threads: int = 0,
+                        progress=None) -> dict:
+        """Gradient of sum(adjoint * image) for every differentiable parameter, as {name: array
+        shaped like the parameter}. ``adjoint`` is a (H, W, 3) array, e.g. dLoss/dImage.
+        Same terms and caveats as :meth:`render_forward`."""
+        interior, primary, boundary = self._diff_options(spp, spp_interior, spp_primary, spp_boundary, guiding, seed)
+        a = np.asarray(adjoint, dtype=np.float32)
+        if a.shape != (self.height, self.width, 3):
+            raise ValueError(f"adjoint must have shape {(self.height, self.width, 3)}, got {a.shape}")
+        grads, stats = self._native.render_backward(self._differentiable, np.ascontiguousarray(a), interior, primary, boundary,
+                                                    seed, threads, progress)
+        self._report(stats)
+        return dict(zip(self._differentiable, grads))
+
     def __repr__(self) -> str:
         return (f"Scene('{self._native.source}', {self.width}x{self.height}, spp={self.spp}, "
                 f"shapes={self._native.shape_ids}, integrator={self._native.integrator})")
@@ -107,7 +188,9 @@ def load(path: str | os.PathLike) -> Scene:
     path = os.fspath(path)
     if not os.path.exists(path):
         raise ValueError(f"scene file '{path}' not found")
-    return Scene(_core.load_file(path))
+    with open(path, "rb") as f:
+        fingerprint = os.path.abspath(path).encode() + b"\0" + f.read()
+    return Scene(_core.load_file(path), fingerprint)
 
 
 def load_dict(description: dict, base_dir: str | os.PathLike | None = None, source: str = "<dict>") -> Scene:
@@ -136,4 +219,8 @@ def load_dict(description: dict, base_dir: str | os.PathLike | None = None, sour
 
     text = json.dumps(convert(description, "scene"), allow_nan=False)
     base = os.fspath(base_dir) if base_dir is not None else os.getcwd()
-    return Scene(_core.load_json(text, source, base, arrays))
+    digest = hashlib.sha256(text.encode())
+    for a in arrays:
+        digest.update(str((a.dtype.str, a.shape)).encode())
+        digest.update(a.tobytes())
+    return Scene(_core.load_json(text, source, base, arrays), digest.digest())

@@ -6,6 +6,7 @@
 #include <pybind11/stl.h>
 
 #include <exception>
+#include "core/diff/render_diff.h"
 #include "core/geometry/accel.h"
 #include "core/io/image_io.h"
 #include "core/io/mesh_io.h"
@@ -48,15 +49,10 @@ Image numpy_to_image(const py::array& a0) {
   return img;
 }
 
-// Render with the GIL released. The progress callback (if any) runs with the GIL re-acquired;
-// it also gives Ctrl-C a chance: a pending signal cancels the render and is re-raised here.
-py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int threads, py::object progress) {
-  RenderOptions opt;
-  opt.spp = spp;
-  opt.seed = seed;
-  opt.threads = threads;
-  std::exception_ptr callback_error;
-  opt.progress = [&](float fraction) -> bool {
+// Progress callback run with the GIL; a pending signal (Ctrl-C) or an exception from the callback
+// cancels the computation and is kept in `error` to be re-raised afterwards.
+std::function<bool(float)> progress_adapter(py::object progress, std::exception_ptr& error) {
+  return [progress, &error](float fraction) -> bool {
     py::gil_scoped_acquire gil;
     try {
       if (PyErr_CheckSignals() != 0) throw py::error_already_set();
@@ -64,20 +60,57 @@ py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int thr
       py::object r = progress(fraction);
       return r.is_none() || r.cast<bool>();
     } catch (...) {
-      if (!callback_error) callback_error = std::current_exception();
+      if (!error) error = std::current_exception();
       return false;
     }
   };
-  RenderStats stats;
-  Image img;
+}
+
+py::dict diff_stats_dict(const DiffStats& st) {
+  py::dict d;
+  d["seconds"] = st.seconds;
+  d["paths"] = st.paths;
+  d["rays"] = st.rays;
+  d["invalid_paths"] = st.invalid_paths;
+  d["summary"] = st.summary;
+  return d;
+}
+
+DiffOptions diff_options(int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads) {
+  DiffOptions o;
+  o.spp_interior = spp_interior;
+  o.spp_primary = spp_primary;
+  o.spp_boundary = spp_boundary;
+  o.seed = seed;
+  o.threads = threads;
+  return o;
+}
+
+// Runs f with the GIL released; a cancellation caused by the callback re-raises its error.
+template <typename F>
+auto run_released(std::exception_ptr& error, F&& f) {
   try {
     py::gil_scoped_release release;
-    img = render(*scene, opt, &stats);
+    auto r = f();
+    return r;
   } catch (const RenderCancelled&) {
-    if (callback_error) std::rethrow_exception(callback_error);
+    if (error) std::rethrow_exception(error);
     throw;
   }
-  if (callback_error) std::rethrow_exception(callback_error);  // e.g. Ctrl-C seen at the final call
+}
+
+// Render with the GIL released. The progress callback (if any) runs with the GIL re-acquired;
+// it also gives Ctrl-C a chance: a pending signal cancels the render and is re-raised here.
+py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int threads, py::object progress) {
+  RenderOptions opt;
+  opt.spp = spp;
+  opt.seed = seed;
+  opt.threads = threads;
+  std::exception_ptr error;
+  opt.progress = progress_adapter(progress, error);
+  RenderStats stats;
+  Image img = run_released(error, [&] { return render(*scene, opt, &stats); });
+  if (error) std::rethrow_exception(error);  // e.g. Ctrl-C seen at the final call
   py::dict s;
   s["seconds"] = stats.seconds;
   s["samples"] = stats.samples;
@@ -85,6 +118,47 @@ py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int thr
   s["invalid_samples"] = stats.invalid_samples;
   s["spp"] = spp > 0 ? spp : scene->spp;
   return py::make_tuple(image_to_numpy(std::move(img)), s);
+}
+
+py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::string>& names, const std::vector<py::array>& tangents,
+                            int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress) {
+  const DiffParams params(*scene, names);
+  if (tangents.size() != params.params().size()) throw std::invalid_argument("one tangent per differentiable parameter expected");
+  std::vector<double> t(params.slot_count(), 0.0);
+  for (size_t i = 0; i < tangents.size(); ++i) {
+    auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(tangents[i]);
+    const DiffParam& p = params.params()[i];
+    if (!a || size_t(a.size()) != p.size) throw std::invalid_argument("tangent of '" + p.name + "' has the wrong size");
+    std::copy(a.data(), a.data() + a.size(), t.begin() + long(p.offset));
+  }
+  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads);
+  std::exception_ptr error;
+  opt.progress = progress_adapter(progress, error);
+  DiffStats st;
+  Image img = run_released(error, [&] { return render_forward(*scene, params, t, opt, &st); });
+  if (error) std::rethrow_exception(error);
+  return py::make_tuple(image_to_numpy(std::move(img)), diff_stats_dict(st));
+}
+
+py::tuple render_backward_py(const SceneHandle& scene, const std::vector<std::string>& names, const py::array& adjoint,
+                             int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress) {
+  const DiffParams params(*scene, names);
+  Image adj = numpy_to_image(adjoint);
+  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads);
+  std::exception_ptr error;
+  opt.progress = progress_adapter(progress, error);
+  DiffStats st;
+  std::vector<double> g = run_released(error, [&] { return render_backward(*scene, params, adj, opt, &st); });
+  if (error) std::rethrow_exception(error);
+  py::list grads;
+  for (const DiffParam& p : params.params()) {
+    std::vector<py::ssize_t> shape(p.shape.begin(), p.shape.end());
+    py::array_t<float> a(shape);
+    float* dst = a.mutable_data();
+    for (size_t i = 0; i < p.size; ++i) dst[i] = float(g[p.offset + i]);
+    grads.append(a);
+  }
+  return py::make_tuple(grads, diff_stats_dict(st));
 }
 
 py::array parameter_view(const SceneHandle& scene, const std::string& name) {
@@ -111,6 +185,12 @@ PYBIND11_MODULE(_core, m) {
       })
       .def("parameter", &parameter_view, "Writable float32 view of a parameter")
       .def("update", &Scene::update, "Apply parameter edits; returns the names that changed")
+      .def("render_forward", &render_forward_py, py::arg("names"), py::arg("tangents"), py::arg("spp_interior") = 0,
+           py::arg("spp_primary") = 0, py::arg("spp_boundary") = 0, py::arg("seed") = 0, py::arg("threads") = 0,
+           py::arg("progress") = py::none())
+      .def("render_backward", &render_backward_py, py::arg("names"), py::arg("adjoint"), py::arg("spp_interior") = 0,
+           py::arg("spp_primary") = 0, py::arg("spp_boundary") = 0, py::arg("seed") = 0, py::arg("threads") = 0,
+           py::arg("progress") = py::none())
       .def_property_readonly("width", [](const Scene& s) { return s.camera.width; })
       .def_property_readonly("height", [](const Scene& s) { return s.camera.height; })
       .def_property_readonly("spp", [](const Scene& s) { return s.spp; })

@@ -8,6 +8,15 @@ namespace limn {
 
 void Mesh::update_derived() {
   const size_t nt = triangle_count();
+  if (vertex_face_offsets.size() != vertex_count() + 1) {  // topology is fixed: build once
+    vertex_face_offsets.assign(vertex_count() + 1, 0);
+    for (uint32_t i : indices) vertex_face_offsets[i + 1]++;
+    for (size_t v = 0; v < vertex_count(); ++v) vertex_face_offsets[v + 1] += vertex_face_offsets[v];
+    vertex_faces.assign(indices.size(), 0);
+    std::vector<uint32_t> fill(vertex_face_offsets.begin(), vertex_face_offsets.end() - 1);
+    for (size_t f = 0; f < nt; ++f)
+      for (int k = 0; k < 3; ++k) vertex_faces[fill[indices[3 * f + k]]++] = uint32_t(f);
+  }
   triangle_areas.assign(nt, 0.0f);
   vertex_normals.assign(face_normals ? 0 : vertex_count(), Vec3(0.0f));
   double total = 0.0;
@@ -64,7 +73,7 @@ PositionSample Mesh::sample_position(const Vec2& u, float u_tri) const {
   SurfaceInteraction si;
   fill_interaction(int(prim), b.x, b.y, si);
   // P(triangle) = area_f / total, then uniform on it: pdf_area = 1 / total_area.
-  return PositionSample{si.p, si.ng, si.uv, total_area > 0.0f ? 1.0f / total_area : 0.0f};
+  return PositionSample{si.p, si.ng, si.uv, total_area > 0.0f ? 1.0f / total_area : 0.0f, int(prim), b};
 }
 
 std::vector<uint32_t> weld_by_position(const std::vector<float>& positions, const std::vector<uint32_t>& indices,

@@ -12,6 +12,8 @@ struct PositionSample {
   Vec3 p, n;        // point and unit surface normal
   Vec2 uv;
   float pdf_area;   // density with respect to surface area
+  int prim = 0;     // triangle (meshes) ...
+  Vec2 bary{0.0f};  // ... and its barycentrics (b1, b2): the point's material coordinates
 };
 
 struct Mesh {
@@ -22,6 +24,7 @@ struct Mesh {
 
   // Derived state, recomputed by update_derived() after positions change.
   std::vector<Vec3> vertex_normals;
+  std::vector<uint32_t> vertex_face_offsets, vertex_faces;  // CSR: triangles around each vertex
   std::vector<float> triangle_areas;
   Distribution1D area_distribution;  // triangles by area
   float total_area = 0.0f;

@@ -49,7 +49,7 @@ PositionSample Sphere::sample_position(const Vec2& u) const {
   const Vec3 n = warp::square_to_uniform_sphere(u);
   SurfaceInteraction si;
   fill_interaction(center + radius * n, si);
-  return PositionSample{si.p, si.ng, si.uv, 1.0f / area()};
+  return PositionSample{si.p, si.ng, si.uv, 1.0f / area(), 0, si.uv};
 }
 
 }  // namespace limn

@@ -70,6 +70,7 @@ EmitterSample sample_emitter(const Emitter& e, const std::vector<Shape>& shapes,
       if (cos_light <= 0.0f) return;  // one-sided emission: the back does not emit
       s.wi = d;
       s.p = ps.p;
+      s.position = ps;
       s.pdf = ps.pdf_area * dist2 / cos_light;
       s.radiance = m.radiance;
     } else if constexpr (std::is_same_v<T, PointEmitter>) {

@@ -64,6 +64,7 @@ struct EmitterSample {
   Spectrum radiance{0.0f};  // arriving radiance (delta lights: irradiance-like value, see below)
   float pdf = 0.0f;         // solid angle density of wi; 1 for delta emitters
   bool delta = false;
+  PositionSample position;  // area emitters: the sampled point with its material coordinates
 };
 
 // Samples a direction towards emitter e from point x. For delta emitters `radiance` is the

@@ -1,0 +1,65 @@
+"""Central finite differences of whole renders, the reference for every derivative (design.md 5)."""
+from __future__ import annotations
+
+import hashlib
+import os
+
+import numpy as np
+
+from .scene import Scene
+
+
+def default_cache_dir() -> str:
+    return os.environ.get("LIMN_FD_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "limn", "fd"))
+
+
+def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache: bool | str = True,
+       threads: int = 0) -> np.ndarray:
+    """(I(theta + eps t) - I(theta - eps t)) / (2 eps) from two primal renders with the same random
+    numbers. ``tangents`` maps parameter names to arrays shaped like the parameters. The parameters
+    are restored afterwards. Results are cached on disk (``cache``: True for the default folder,
+    $LIMN_FD_CACHE or ~/.cache/limn/fd; a path; or False), keyed by the scene's source, every
+    parameter value, the tangents and the settings."""
+    if not eps > 0:
+        raise ValueError(f"eps must be > 0 (got {eps})")
+    base = {}
+    for name, t in tangents.items():
+        view = scene.params[name]
+        t = np.asarray(t, dtype=np.float32)
+        if t.shape != view.shape:
+            raise ValueError(f"tangent of '{name}': expected shape {view.shape}, got {t.shape}")
+        base[name] = (view.copy(), t)
+
+    path = None
+    if cache:
+        digest = hashlib.sha256(scene._fingerprint)
+        for name in sorted(scene.params):
+            digest.update(name.encode())
+            digest.update(np.ascontiguousarray(scene.params[name]).tobytes())
+        for name in sorted(base):
+            digest.update(b"tangent:" + name.encode())
+            digest.update(base[name][1].tobytes())
+        digest.update(repr((float(eps), int(spp), int(seed), scene.width, scene.height)).encode())
+        folder = cache if isinstance(cache, str) else default_cache_dir()
+        path = os.path.join(folder, digest.hexdigest()[:32] + ".npy")
+        if os.path.exists(path):
+            return np.load(path)
+
+    images = []
+    try:
+        for sign in (1.0, -1.0):
+            for name, (value, t) in base.items():
+                scene.params[name] = value + np.float32(sign * eps) * t
+            images.append(scene.render(spp=spp, seed=seed, threads=threads))
+    finally:
+        for name, (value, _) in base.items():
+            scene.params[name] = value
+        scene.update()
+    result = (images[0].astype(np.float64) - images[1]) / (2.0 * eps)
+    result = result.astype(np.float32)
+    if path:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        tmp = path + f".{os.getpid()}.tmp.npy"
+        np.save(tmp, result)
+        os.replace(tmp, path)
+    return result

@@ -1,0 +1,404 @@
+#include "core/diff/interior.h"
+
+#include "core/diff/local_derivatives.h"
+#include "core/render/bsdfs/fresnel.h"
+
+namespace limn {
+namespace {
+
+using ad::Var;
+using VV = ad::V3<Var>;
+
+VV constant(const Vec3& v) { return VV(Var(v.x), Var(v.y), Var(v.z)); }
+
+// w with its value replaced by the primal direction and its derivative kept. Directions rebuilt
+// from two attached points carry their rounding error divided by the segment length, which on
+// short grazing segments visibly changes glossy BSDF values; the primal path used `primal`.
+VV with_primal_value(const VV& w, const Vec3& primal) {
+  return VV(w.x + Var(double(primal.x) - w.x.v), w.y + Var(double(primal.y) - w.y.v), w.z + Var(double(primal.z) - w.z.v));
+}
+
+// A path vertex as a function of the parameters.
+struct DiffVertex {
+  VV p, ng, ns;       // position, geometric normal, shading normal (ns on ng's side)
+  Var jacobian{1.0};  // area of the attached surface element relative to its primal area
+  Var u{0.0}, v{0.0}; // texture coordinates
+};
+
+struct Replay {
+  const Scene& scene;
+  const DiffParams& params;
+  PathInputs& in;
+
+  // ---- geometry ---------------------------------------------------------------------------------
+  VV vertex(int shape, uint32_t i) const {
+    const Mesh& m = scene.shapes[shape].mesh();
+    const long slot = params.slot(Parameter::Kind::VertexPositions, shape);
+    const float* p = &m.positions[3 * size_t(i)];
+    if (slot < 0) return VV(Var(p[0]), Var(p[1]), Var(p[2]));
+    const long base = slot + 3 * long(i);
+    return VV(in.make(p[0], base), in.make(p[1], base + 1), in.make(p[2], base + 2));
+  }
+  // Area-weighted vertex normal from the triangles around vertex i (as Mesh::update_derived).
+  VV vertex_normal(int shape, uint32_t i) const {
+    const Mesh& m = scene.shapes[shape].mesh();
+    if (params.slot(Parameter::Kind::VertexPositions, shape) < 0) return constant(m.vertex_normals[i]);
+    VV sum;
+    for (uint32_t k = m.vertex_face_offsets[i]; k < m.vertex_face_offsets[i + 1]; ++k) {
+      const uint32_t f = m.vertex_faces[k];
+      const VV a = vertex(shape, m.indices[3 * f]), b = vertex(shape, m.indices[3 * f + 1]), c = vertex(shape, m.indices[3 * f + 2]);
+      sum = sum + cross(b - a, c - a);
+    }
+    return ad::dot(sum, sum).v > 0.0 ? normalize(sum) : constant(m.vertex_normals[i]);
+  }
+  void triangle(int shape, int prim, VV& v0, VV& v1, VV& v2) const {
+    const Mesh& m = scene.shapes[shape].mesh();
+    v0 = vertex(shape, m.indices[3 * prim]);
+    v1 = vertex(shape, m.indices[3 * prim + 1]);
+    v2 = vertex(shape, m.indices[3 * prim + 2]);
+  }
+  // Normals and uv of a mesh point with (possibly differentiable) barycentrics.
+  void mesh_surface(int shape, int prim, const VV& v0, const VV& v1, const VV& v2, const Var& b1, const Var& b2,
+                    DiffVertex& x) const {
+    const Mesh& m = scene.shapes[shape].mesh();
+    const Var b0 = Var(1.0) - b1 - b2;
+    const VV n = cross(v1 - v0, v2 - v0);
+    x.ng = normalize(n);
+    x.ns = x.ng;
+    if (!m.face_normals) {
+      const uint32_t* idx = &m.indices[3 * size_t(prim)];
+      const VV s = vertex_normal(shape, idx[0]) * b0 + vertex_normal(shape, idx[1]) * b1 + vertex_normal(shape, idx[2]) * b2;
+      if (ad::dot(s, s).v > 0.0) {
+        x.ns = normalize(s);
+        if (ad::dot(x.ns, x.ng).v < 0.0) x.ns = -x.ns;
+      }
+    }
+    if (!m.corner_uvs.empty()) {
+      const float* t = &m.corner_uvs[6 * size_t(prim)];
+      x.u = b0 * Var(t[0]) + b1 * Var(t[2]) + b2 * Var(t[4]);
+      x.v = b0 * Var(t[1]) + b1 * Var(t[3]) + b2 * Var(t[5]);
+    } else {
+      x.u = b1;
+      x.v = b2;
+    }
+  }
+  void sphere_params(int shape, VV& c, Var& r) const {
+    const Sphere& s = scene.shapes[shape].sphere();
+    const long cs = params.slot(Parameter::Kind::SphereCenter, shape), rs = params.slot(Parameter::Kind::SphereRadius, shape);
+    c = cs < 0 ? constant(s.center) : VV(in.make(s.center.x, cs), in.make(s.center.y, cs + 1), in.make(s.center.z, cs + 2));
+    r = in.make(s.radius, rs);
+  }
+
+  // A vertex attached to its surface at the primal point's material coordinates.
+  DiffVertex attach(int shape, int prim, const Vec2& bary, const Vec3& sphere_dir, const Vec2& uv) const {
+    DiffVertex x;
+    const Shape& sh = scene.shapes[shape];
+    if (sh.is_mesh()) {
+      VV v0, v1, v2;
+      triangle(shape, prim, v0, v1, v2);
+      const Var b1(bary.x), b2(bary.y);
+      x.p = v0 * (Var(1.0) - b1 - b2) + v1 * b1 + v2 * b2;
+      mesh_surface(shape, prim, v0, v1, v2, b1, b2, x);
+      x.jacobian = length(cross(v1 - v0, v2 - v0)) / Var(2.0 * double(sh.mesh().triangle_areas[prim]));
+    } else {
+      VV c;
+      Var r;
+      sphere_params(shape, c, r);
+      const VV n0 = constant(sphere_dir);
+      x.p = c + n0 * r;
+      x.ng = x.ns = n0;
+      const double r0 = sh.sphere().radius;
+      x.jacobian = (r * r) / Var(r0 * r0);
+      x.u = Var(uv.x);
+      x.v = Var(uv.y);
+    }
+    return x;
+  }
+  DiffVertex attach(const SurfaceInteraction& si) const {
+    return attach(si.shape, si.prim, si.bary, si.ng, si.uv);
+  }
+
+  // The vertex where the differentiated ray (o, d) meets the primal hit's surface.
+  DiffVertex ray_hit(const VV& o, const VV& d, const SurfaceInteraction& si, const Ray& primal_ray) const {
+    DiffVertex x;
+    const Shape& sh = scene.shapes[si.shape];
+    if (sh.is_mesh()) {
+      VV v0, v1, v2;
+      triangle(si.shape, si.prim, v0, v1, v2);
+      const Var t = diff::ray_triangle_t(o, d, v0, v1, v2);
+      x.p = o + d * t;
+      Var b1, b2;
+      diff::barycentrics(x.p, v0, v1, v2, b1, b2);
+      mesh_surface(si.shape, si.prim, v0, v1, v2, b1, b2, x);
+    } else {
+      VV c;
+      Var r;
+      sphere_params(si.shape, c, r);
+      // Which root the primal hit was: the near one unless the ray starts inside.
+      const Vec3 oc = primal_ray.o - sh.sphere().center;
+      const bool far = glm::dot(oc, oc) < sh.sphere().radius * sh.sphere().radius;
+      const Var t = diff::ray_sphere_t(o, d, c, r, far);
+      x.p = o + d * t;
+      x.ng = x.ns = (x.p - c) / r;
+      x.u = Var(si.uv.x);
+      x.v = Var(si.uv.y);
+    }
+    return x;
+  }
+
+  // ---- materials and emitters ---------------------------------------------------------------------
+  VV reflectance(int bsdf, const Texture& tex, const Var& u, const Var& v) const {
+    const long slot = params.slot(Parameter::Kind::Reflectance, bsdf);
+    if (!tex.bitmap) {
+      const Spectrum& c = tex.value;
+      return VV(in.make(c.x, slot), in.make(c.y, slot < 0 ? -1 : slot + 1), in.make(c.z, slot < 0 ? -1 : slot + 2));
+    }
+    // Bilinear lookup as Bitmap::eval_bilinear, differentiable in the texels and in (u, v).
+    const Bitmap& bm = *tex.bitmap;
+    const Var x = u * Var(bm.width) - Var(0.5), y = (Var(1.0) - v) * Var(bm.height) - Var(0.5);
+    const double fx = std::floor(x.v), fy = std::floor(y.v);
+    const Var tx = x - Var(fx), ty = y - Var(fy);
+    auto wrap = [](long i, long n) { const long m = i % n; return m < 0 ? m + n : m; };
+    VV out;
+    const long xs[2] = {wrap(long(fx), bm.width), wrap(long(fx) + 1, bm.width)};
+    const long ys[2] = {wrap(long(fy), bm.height), wrap(long(fy) + 1, bm.height)};
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        const Var w = (i ? tx : Var(1.0) - tx) * (j ? ty : Var(1.0) - ty);
+        const size_t texel = size_t(ys[j]) * bm.width + size_t(xs[i]);
+        const long base = slot < 0 ? -1 : slot + long(3 * texel);
+        const Spectrum c = bm.texel(int(xs[i]), int(ys[j]));
+        out = out + VV(in.make(c.x, base), in.make(c.y, base < 0 ? -1 : base + 1), in.make(c.z, base < 0 ? -1 : base + 2)) * w;
+      }
+    return out;
+  }
+  VV emitter_value(int emitter, const Spectrum& value) const {
+    const long slot = params.slot(Parameter::Kind::EmitterValue, emitter);
+    return VV(in.make(value.x, slot), in.make(value.y, slot < 0 ? -1 : slot + 1), in.make(value.z, slot < 0 ? -1 : slot + 2));
+  }
+  Var alpha(int bsdf, float value) const { return in.make(value, params.slot(Parameter::Kind::Alpha, bsdf)); }
+
+  // f * |cos wo| at x for world directions wi (towards the previous vertex) and wo.
+  VV bsdf_eval(int bsdf_index, const DiffVertex& x, const VV& wi_world, const VV& wo_world) const {
+    const Bsdf& b = scene.bsdfs[bsdf_index];
+    const diff::Frame3<Var> frame(x.ns);
+    VV wi = frame.to_local(wi_world), wo = frame.to_local(wo_world);
+    if (b.twosided && wi.z.v < 0.0) {
+      wi.z = -wi.z;
+      wo.z = -wo.z;
+    }
+    return std::visit([&](const auto& m) -> VV {
+      using T = std::decay_t<decltype(m)>;
+      if constexpr (std::is_same_v<T, Diffuse>) {
+        return diff::eval_diffuse(reflectance(bsdf_index, m.reflectance, x.u, x.v), wi, wo);
+      } else if constexpr (std::is_same_v<T, RoughConductor>) {
+        return diff::eval_rough_conductor(m.distribution.type, alpha(bsdf_index, m.distribution.alpha), m.eta, m.k,
+                                          m.specular_reflectance, wi, wo);
+      } else if constexpr (std::is_same_v<T, RoughDielectric>) {
+        return diff::eval_rough_dielectric(m.distribution.type, alpha(bsdf_index, m.distribution.alpha), double(m.eta),
+                                           m.specular_reflectance, m.specular_transmittance, wi, wo);
+      } else {
+        return VV();  // delta lobes have no density to evaluate
+      }
+    }, b.model);
+  }
+
+  // Throughput of a delta lobe, divided by the primal probability of choosing it (detached), and
+  // the outgoing direction as a function of the parameters.
+  VV delta_bounce(int bsdf_index, const DiffVertex& x, const VV& wi_world, const BsdfSample& bs, VV& wo_world) const {
+    const Bsdf& b = scene.bsdfs[bsdf_index];
+    const Var cos_i = dot(wi_world, x.ns);
+    if (const auto* c = std::get_if<Conductor>(&b.model)) {
+      wo_world = diff::reflect(wi_world, x.ns);
+      const Var ci = abs(cos_i);  // twosided conductors reflect on either side
+      return VV(diff::fresnel_conductor(ci, c->eta.x, c->k.x) * Var(c->specular_reflectance.x),
+                diff::fresnel_conductor(ci, c->eta.y, c->k.y) * Var(c->specular_reflectance.y),
+                diff::fresnel_conductor(ci, c->eta.z, c->k.z) * Var(c->specular_reflectance.z));
+    }
+    const auto& d = std::get<Dielectric>(b.model);
+    const Var F = diff::fresnel_dielectric(cos_i, double(d.eta));
+    const double F0 = F.v;
+    if (bs.eta == 1.0f) {  // reflection, chosen with probability F0
+      wo_world = diff::reflect(wi_world, x.ns);
+      return constant(d.specular_reflectance) * (F / Var(F0));
+    }
+    const bool outside = cos_i.v >= 0.0;
+    const double eta_ti = outside ? 1.0 / d.eta : d.eta;
+    const Var cos_t2 = Var(1.0) - Var(eta_ti * eta_ti) * (Var(1.0) - cos_i * cos_i);
+    const Var cos_t = sqrt(cos_t2) * Var(outside ? -1.0 : 1.0);
+    wo_world = x.ns * (Var(eta_ti) * cos_i + cos_t) - wi_world * Var(eta_ti);
+    return constant(d.specular_transmittance) * ((Var(1.0) - F) / Var(1.0 - F0) * Var(eta_ti * eta_ti));
+  }
+};
+
+}  // namespace
+
+ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& params, const Ray& camera_ray, Pcg32& rng,
+                                       PathInputs& inputs, PathCounters& counters) {
+  const IntegratorSettings& cfg = scene.integrator;
+  VV L;
+  if (cfg.max_depth == 0) return L;
+  const Replay R{scene, params, inputs};
+
+  // Primal state, exactly as path_radiance() keeps it.
+  Spectrum beta_primal(1.0f);
+  Ray ray = camera_ray;
+  float prev_pdf = 0.0f;
+  bool prev_delta = true;
+  Vec3 prev_p_primal(0.0f);
+  float eta_scale = 1.0f;
+
+  // Differentiable state.
+  VV beta(Var(1.0), Var(1.0), Var(1.0));     // throughput up to the current vertex
+  VV ray_o = constant(camera_ray.o), ray_d = constant(camera_ray.d);  // the ray, when it is followed
+  bool follow_ray = true;                    // next vertex slides along (ray_o, ray_d)
+  DiffVertex prev;                           // last non-delta vertex (the BSDF sample came from there)
+  VV prev_wi;
+  int prev_bsdf = -1;
+  Vec3 prev_wo_primal(0.0f);
+
+  for (int depth = 0;; ++depth) {
+    SurfaceInteraction si;
+    counters.rays++;
+    const bool hit = scene.intersect(ray, si);
+
+    if (!hit) {
+      if (depth == 0 && cfg.hide_emitters) break;
+      if (!follow_ray) {  // the sampled direction escapes: f / pdf with the direction held fixed
+        const VV w = constant(prev_wo_primal);
+        beta = beta * R.bsdf_eval(prev_bsdf, prev, prev_wi, w) / Var(prev_pdf);
+      }
+      for (int idx : scene.infinite_emitters) {
+        const Emitter& e = scene.emitters[idx];
+        const float w = prev_delta || !cfg.emitter_sampling ? 1.0f : mis_power(prev_pdf, pdf_infinite(e, ray.d) * scene.emitter_selection_pdf());
+        VV Le = constant(eval_infinite(e, ray.d));
+        if (const auto* c = std::get_if<ConstantEmitter>(&e.model)) Le = R.emitter_value(idx, c->radiance);
+        L = L + beta * Le * Var(w);
+      }
+      break;
+    }
+
+    // The vertex as a function of the parameters, and the throughput reaching it.
+    DiffVertex x;
+    VV wi;  // towards the previous vertex
+    if (follow_ray) {
+      x = R.ray_hit(ray_o, ray_d, si, ray);
+      wi = -ray_d;
+    } else {
+      x = R.attach(si);
+      const VV dvec = x.p - prev.p;
+      const Var d2 = dot(dvec, dvec);
+      const VV w = with_primal_value(dvec / sqrt(d2), prev_wo_primal);
+      const Var cos_x = abs(dot(x.ng, w));
+      // Material form: solid-angle sample at prev -> area at x; g / g0 is 1 at the primal point.
+      const Var g = cos_x / d2 * x.jacobian;
+      const double g0 = cos_x.v / d2.v;
+      beta = beta * R.bsdf_eval(prev_bsdf, prev, prev_wi, w) * (g / Var(double(prev_pdf) * g0));
+      wi = -w;
+    }
+
+    const Shape& shape = scene.shapes[si.shape];
+    if (shape.emitter >= 0 && glm::dot(si.ng, ray.d) < 0.0f && !(depth == 0 && cfg.hide_emitters)) {
+      float w = 1.0f;
+      if (!prev_delta && cfg.emitter_sampling) {
+        const float pdf_light = pdf_emitter_area(scene.emitters[shape.emitter], shape, prev_p_primal, si.p, si.ng) *
+                                scene.emitter_selection_pdf();
+        w = mis_power(prev_pdf, pdf_light);
+      }
+      const Spectrum& rad = std::get<AreaEmitter>(scene.emitters[shape.emitter].model).radiance;
+      L = L + beta * R.emitter_value(shape.emitter, rad) * Var(w);
+    }
+
+    if (cfg.max_depth >= 0 && depth + 2 > cfg.max_depth) break;
+
+    const Bsdf& bsdf = scene.bsdfs[shape.bsdf];
+    const Vec3 wi_local = si.frame.to_local(-ray.d);
+
+    // Next-event estimation (same random numbers and tests as estimate_direct()).
+    if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty()) {
+      const size_t n = scene.emitters.size();
+      const size_t k = std::min(size_t(rng.next_float() * n), n - 1);
+      const Emitter& e = scene.emitters[k];
+      const Vec2 u = rng.next_2d();
+      const float u_extra = rng.next_float();
+      const EmitterSample es = sample_emitter(e, scene.shapes, si.p, u, u_extra);
+      bool ok = es.pdf > 0.0f && !is_black(es.radiance);
+      Vec3 wo_local(0.0f);
+      if (ok) {
+        wo_local = si.frame.to_local(es.wi);
+        ok = glm::dot(es.wi, si.ng) * wo_local.z > 0.0f && !is_black(bsdf.eval(wi_local, wo_local, si.uv));
+      }
+      if (ok) {
+        counters.rays++;
+        ok = !scene.occluded(es.to_infinity ? spawn_ray(si, es.wi) : spawn_ray_to(si, es.p));
+      }
+      if (ok) {
+        const float pdf_light = es.pdf * scene.emitter_selection_pdf();
+        const float w = es.delta || !cfg.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv));
+        VV contrib;
+        if (const auto* area = std::get_if<AreaEmitter>(&e.model)) {
+          const PositionSample& ps = es.position;
+          const DiffVertex y = R.attach(area->shape, ps.prim, ps.bary, ps.n, ps.uv);
+          const VV dvec = y.p - x.p;
+          const Var d2 = dot(dvec, dvec);
+          const VV w_dir = with_primal_value(dvec / sqrt(d2), es.wi);
+          const Var cos_y = -dot(y.ng, w_dir);
+          const Var g = cos_y / d2 * y.jacobian;
+          const double g0 = cos_y.v / d2.v;
+          contrib = R.bsdf_eval(shape.bsdf, x, wi, w_dir) * R.emitter_value(int(k), area->radiance) * (g / Var(double(pdf_light) * g0));
+        } else if (const auto* pt = std::get_if<PointEmitter>(&e.model)) {
+          const VV dvec = constant(pt->position) - x.p;
+          const Var d2 = dot(dvec, dvec);
+          contrib = R.bsdf_eval(shape.bsdf, x, wi, with_primal_value(dvec / sqrt(d2), es.wi)) * R.emitter_value(int(k), pt->intensity) /
+                    (d2 * Var(scene.emitter_selection_pdf()));
+        } else if (const auto* dir = std::get_if<DirectionalEmitter>(&e.model)) {
+          contrib = R.bsdf_eval(shape.bsdf, x, wi, constant(-dir->direction)) * R.emitter_value(int(k), dir->irradiance) /
+                    Var(scene.emitter_selection_pdf());
+        } else {
+          VV Le = constant(es.radiance);
+          if (const auto* c = std::get_if<ConstantEmitter>(&e.model)) Le = R.emitter_value(int(k), c->radiance);
+          contrib = R.bsdf_eval(shape.bsdf, x, wi, constant(es.wi)) * Le / Var(pdf_light);
+        }
+        L = L + beta * contrib * Var(w);
+      }
+    }
+    if (!cfg.bsdf_sampling) break;
+
+    // BSDF sampling (same random numbers and tests as path_radiance()).
+    const float u_lobe = rng.next_float();
+    const auto bs = bsdf.sample(wi_local, u_lobe, rng.next_2d(), si.uv);
+    if (!bs) break;
+    const Vec3 wo = si.frame.to_world(bs->wo);
+    if (glm::dot(wo, si.ng) * bs->wo.z <= 0.0f) break;
+    if (bs->delta) {
+      VV wo_var;
+      beta = beta * R.delta_bounce(shape.bsdf, x, wi, *bs, wo_var);
+      ray_o = x.p;
+      ray_d = wo_var;
+      follow_ray = true;
+    } else {
+      prev = x;
+      prev_wi = wi;
+      prev_bsdf = shape.bsdf;
+      prev_wo_primal = wo;
+      follow_ray = false;
+    }
+    beta_primal *= bs->weight;
+    prev_pdf = bs->pdf;
+    prev_delta = bs->delta;
+    prev_p_primal = si.p;
+    eta_scale *= bs->eta * bs->eta;
+    ray = spawn_ray(si, wo);
+
+    if (depth + 1 >= cfg.rr_depth) {
+      const float q = std::min(max_component(beta_primal) * eta_scale, 0.95f);
+      if (!(rng.next_float() < q)) break;
+      beta = beta / Var(q);
+      beta_primal /= q;
+    }
+    if (is_black(beta_primal)) break;
+  }
+  return L;
+}
+
+}  // namespace limn

@@ -1,0 +1,40 @@
+// render_forward / render_backward: derivative images and parameter gradients.
+//
+// Implemented: the interior term (interior.h) for every parameter kind. Not implemented yet: the
+// boundary terms (primary visibility at silhouettes, indirect visibility: projective-sampling
+// paper Eq. 4); when differentiable geometry could create visibility discontinuities the summary
+// says that those derivatives are missing.
+#pragma once
+#include <functional>
+#include <string>
+#include <vector>
+#include "core/diff/diff_params.h"
+#include "core/render/render.h"
+
+namespace limn {
+
+struct DiffOptions {
+  int spp_interior = 0;   // 0: the scene's sample count
+  int spp_primary = 0;    // primary-visibility boundary samples per pixel (not implemented: must be 0)
+  int spp_boundary = 0;   // indirect boundary samples (not implemented: must be 0)
+  uint64_t seed = 0;
+  int threads = 0;
+  std::function<bool(float)> progress;
+};
+
+struct DiffStats {
+  double seconds = 0.0;
+  uint64_t paths = 0, rays = 0;
+  uint64_t invalid_paths = 0;   // non-finite values or derivatives, dropped
+  std::vector<std::string> summary;  // what was computed and what was left out, and why
+};
+
+// Derivative image d(image)/d(theta) along `tangent` (one value per slot of `params`).
+Image render_forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent,
+                     const DiffOptions& options, DiffStats* stats = nullptr);
+
+// Gradient of sum(adjoint * image) with respect to every slot of `params`.
+std::vector<double> render_backward(const Scene& scene, const DiffParams& params, const Image& adjoint,
+                                    const DiffOptions& options, DiffStats* stats = nullptr);
+
+}  // namespace limn
