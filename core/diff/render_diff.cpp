@@ -8,6 +8,7 @@
 #include <chrono>
 #include <mutex>
 #include "core/diff/interior.h"
+#include "core/diff/primary.h"
 
 namespace limn {
 namespace {
@@ -42,19 +43,59 @@ void for_each_pixel(const Scene& scene, const DiffOptions& opt, PerPixel&& per_p
 
 void validate(const Scene& scene, const DiffParams& params, const DiffOptions& opt) {
   if (params.empty()) throw std::invalid_argument(scene.source + ": no differentiable parameters (call set_differentiable first)");
-  if (opt.spp_primary != 0 || opt.spp_boundary != 0)
-    throw std::invalid_argument(scene.source + ": boundary terms (spp_primary, spp_boundary) are not implemented yet; pass 0");
+  if (opt.spp_boundary != 0)
+    throw std::invalid_argument(scene.source + ": the indirect boundary term (spp_boundary) is not implemented yet; pass 0");
+  if (opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
 }
 
-std::vector<std::string> summarize(const Scene& scene, const DiffParams& params, int spp) {
+std::vector<std::string> summarize(const Scene& scene, const DiffParams& params, int spp, const DiffOptions& opt,
+                                   const PrimaryBoundary* primary) {
   std::vector<std::string> s;
   s.push_back("interior term: " + std::to_string(spp) + " paths per pixel, material-form replay");
-  if (params.any_geometry())
-    s.push_back("boundary terms: NOT COMPUTED (not implemented yet): derivatives caused by moving silhouettes, "
-                "shadow edges and reflected edges of the differentiable shapes are missing");
-  else
+  if (!params.any_geometry()) {
     s.push_back("boundary terms: skipped, no differentiable geometry (nothing can change visibility)");
+    return s;
+  }
+  if (opt.spp_primary == 0)
+    s.push_back("primary visibility: switched off (spp_primary = 0): silhouettes seen directly are missing");
+  else if (!primary || primary->empty())
+    s.push_back("primary visibility: skipped, no silhouette of a differentiable shape is in front of the camera");
+  else
+    s.push_back("primary visibility: " + std::to_string(opt.spp_primary) + " samples per pixel over " +
+                std::to_string(primary->curve_count()) + " silhouette curves" +
+                (primary->skipped_edges() ? " (" + std::to_string(primary->skipped_edges()) + " edges crossing the near plane skipped)" : ""));
+  s.push_back("indirect boundary: NOT COMPUTED (not implemented yet): derivatives of shadows and of silhouettes seen "
+              "in reflections or through refraction are missing");
   return s;
+}
+
+// Primary-visibility samples: spp_primary * pixels of them, spread by silhouette length.
+// visit(pixel, delta_L / N, inputs, normal_velocity) is called for every sample that lands.
+template <typename Visit>
+void for_each_primary_sample(const Scene& scene, const PrimaryBoundary& primary, const DiffOptions& opt,
+                             std::atomic<uint64_t>& rays, Visit&& visit) {
+  const uint64_t n = uint64_t(opt.spp_primary) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+  constexpr uint64_t kBlock = 1024;
+  tbb::task_arena arena(opt.threads > 0 ? opt.threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, (n + kBlock - 1) / kBlock, 1), [&](const tbb::blocked_range<uint64_t>& r) {
+      PathInputs in;
+      uint64_t local_rays = 0;
+      for (uint64_t blk = r.begin(); blk != r.end(); ++blk)
+        for (uint64_t j = blk * kBlock; j < std::min(n, (blk + 1) * kBlock); ++j) {
+          // Streams disjoint from the interior term's pixel streams.
+          Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ 0x7072696d61727921ULL), j);
+          ad::Tape::current().clear();
+          in.clear();
+          int pixel;
+          Spectrum dL;
+          ad::Var vn;
+          if (!primary.sample(rng, in, pixel, dL, vn, local_rays) || vn.is_constant()) continue;
+          visit(pixel, dL / float(n), in, vn);
+        }
+      rays += local_rays;
+    });
+  });
 }
 
 bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
@@ -110,13 +151,31 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     rays += counters.rays;
     invalid += bad;
   });
+  std::unique_ptr<PrimaryBoundary> primary;
+  if (params.any_geometry() && opt.spp_primary > 0) {
+    primary = std::make_unique<PrimaryBoundary>(scene, params);
+    if (!primary->empty()) {
+      tbb::enumerable_thread_specific<std::vector<double>> images(std::vector<double>(size_t(W) * H * 3, 0.0));
+      for_each_primary_sample(scene, *primary, opt, rays, [&](int pixel, const Spectrum& dL, const PathInputs& in, const ad::Var& vn) {
+        std::vector<double> adj;
+        ad::Tape::current().backward(vn.idx, 1.0, adj);
+        double v = 0;
+        for (const auto& [node, slot] : in.nodes) v += adj[node] * tangent[slot];
+        if (!std::isfinite(v)) return;
+        std::vector<double>& im = images.local();
+        for (int c = 0; c < 3; ++c) im[3 * size_t(pixel) + c] += double(dL[c]) * v;
+      });
+      for (const auto& im : images)
+        for (size_t i = 0; i < im.size(); ++i) img.rgb[i] += float(im[i]);
+    }
+  }
   ad::Tape::current().clear();
   if (stats) {
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     stats->paths = uint64_t(W) * H * spp;
     stats->rays = rays;
     stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp);
+    stats->summary = summarize(scene, params, spp, opt, primary.get());
   }
   return img;
 }
@@ -166,6 +225,21 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     rays += counters.rays;
     invalid += bad;
   });
+  std::unique_ptr<PrimaryBoundary> primary;
+  if (params.any_geometry() && opt.spp_primary > 0) {
+    primary = std::make_unique<PrimaryBoundary>(scene, params);
+    if (!primary->empty())
+      for_each_primary_sample(scene, *primary, opt, rays, [&](int pixel, const Spectrum& dL, const PathInputs& in, const ad::Var& vn) {
+        const float* a = &adjoint.rgb[3 * size_t(pixel)];
+        const double w = double(a[0]) * dL.x + double(a[1]) * dL.y + double(a[2]) * dL.z;
+        if (w == 0.0) return;
+        std::vector<double> adj;
+        ad::Tape::current().backward(vn.idx, w, adj);
+        if (!finite_adjoints(adj, in)) return;
+        std::vector<double>& g = grads.local();
+        for (const auto& [node, slot] : in.nodes) g[slot] += adj[node];
+      });
+  }
   ad::Tape::current().clear();
   std::vector<double> total(params.slot_count(), 0.0);
   for (const auto& g : grads)
@@ -175,7 +249,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     stats->paths = uint64_t(W) * H * spp;
     stats->rays = rays;
     stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp);
+    stats->summary = summarize(scene, params, spp, opt, primary.get());
   }
   return total;
 }

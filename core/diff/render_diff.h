@@ -1,9 +1,9 @@
 // render_forward / render_backward: derivative images and parameter gradients.
 //
-// Implemented: the interior term (interior.h) for every parameter kind. Not implemented yet: the
-// boundary terms (primary visibility at silhouettes, indirect visibility: projective-sampling
-// paper Eq. 4); when differentiable geometry could create visibility discontinuities the summary
-// says that those derivatives are missing.
+// Implemented: the interior term (interior.h) for every parameter kind and the primary-visibility
+// boundary term (primary.h) for meshes and spheres. Not implemented yet: the indirect boundary
+// term (shadows and silhouettes seen in reflections: projective-sampling paper Eq. 4); when
+// differentiable geometry could create such discontinuities the summary says they are missing.
 #pragma once
 #include <functional>
 #include <string>
@@ -15,7 +15,7 @@ namespace limn {
 
 struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
-  int spp_primary = 0;    // primary-visibility boundary samples per pixel (not implemented: must be 0)
+  int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
   int spp_boundary = 0;   // indirect boundary samples (not implemented: must be 0)
   uint64_t seed = 0;
   int threads = 0;

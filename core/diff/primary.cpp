@@ -1,0 +1,213 @@
+#include "core/diff/primary.h"
+
+#include <unordered_map>
+#include "core/diff/local_derivatives.h"
+#include "core/render/integrators/path.h"
+
+namespace limn {
+namespace {
+
+using ad::Var;
+using VV = ad::V3<Var>;
+using Vec2d = glm::dvec2;
+
+// Offset of the two radiance probes from the curve, in pixels: far above the float resolution of
+// camera ray directions (~4e-5 px at 256 px across 40 degrees), far below any image feature.
+constexpr double kProbeOffset = 1e-3;
+
+struct Projection {
+  Mat4d camera_from_world;
+  double W, H, tan_x, tan_y, near;
+
+  explicit Projection(const Camera& c)
+      : camera_from_world(c.world_from_camera.inverse_matrix()), W(c.width), H(c.height), tan_x(c.tan_half_x),
+        tan_y(c.tan_half_y), near(c.near_clip) {}
+
+  template <typename T>
+  ad::V3<T> to_camera(const ad::V3<T>& p) const {
+    const Mat4d& m = camera_from_world;
+    return ad::V3<T>(T(m[0][0]) * p.x + T(m[1][0]) * p.y + T(m[2][0]) * p.z + T(m[3][0]),
+                     T(m[0][1]) * p.x + T(m[1][1]) * p.y + T(m[2][1]) * p.z + T(m[3][1]),
+                     T(m[0][2]) * p.x + T(m[1][2]) * p.y + T(m[2][2]) * p.z + T(m[3][2]));
+  }
+  // Film position (pixels) of a camera-space point, the inverse of Camera::generate_ray.
+  template <typename T>
+  void film(const ad::V3<T>& pc, T& fx, T& fy) const {
+    fx = T(0.5 * W) * (T(1.0) - pc.x / (pc.z * T(tan_x)));
+    fy = T(0.5 * H) * (T(1.0) - pc.y / (pc.z * T(tan_y)));
+  }
+  // d(film)/d(world point) applied to a world direction dp, at camera-space point pc.
+  Vec2d film_derivative(const ad::V3<double>& pc, const ad::V3<double>& dp_world) const {
+    const ad::V3<double> dpc = to_camera(dp_world) - to_camera(ad::V3<double>(0, 0, 0));
+    const double dfx = -0.5 * W / tan_x * (dpc.x / pc.z - pc.x * dpc.z / (pc.z * pc.z));
+    const double dfy = -0.5 * H / tan_y * (dpc.y / pc.z - pc.y * dpc.z / (pc.z * pc.z));
+    return Vec2d(dfx, dfy);
+  }
+};
+
+ad::V3<double> d3(const Vec3& v) { return ad::V3<double>(v.x, v.y, v.z); }
+
+// The sphere's silhouette circle seen from eye: centre, radius and the plane's frame.
+template <typename T>
+bool outline(const ad::V3<T>& c, const T& r, const ad::V3<double>& eye, ad::V3<T>& q, T& rho, ad::V3<T>& e1, ad::V3<T>& e2) {
+  const ad::V3<T> axis = c - ad::V3<T>(T(eye.x), T(eye.y), T(eye.z));
+  const T d = length(axis);
+  if (ad::value(d) <= ad::value(r)) return false;  // the eye is inside: no silhouette
+  const ad::V3<T> u = axis / d;
+  q = c - u * (r * r / d);
+  rho = r * sqrt(T(1.0) - (r * r) / (d * d));
+  const diff::Frame3<T> f(u);
+  e1 = f.s;
+  e2 = f.t;
+  return true;
+}
+
+}  // namespace
+
+PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
+  const Projection proj(scene.camera);
+  const ad::V3<double> eye = d3(scene.camera.world_from_camera.point(Vec3(0.0f)));
+  auto film_of = [&](const ad::V3<double>& p, Vec2d& s) {
+    const auto pc = proj.to_camera(p);
+    if (pc.z <= proj.near) return false;
+    double fx, fy;
+    proj.film(pc, fx, fy);
+    s = Vec2d(fx, fy);
+    return true;
+  };
+  std::vector<float> weights;
+  for (int si : params.moving_shapes()) {
+    const Shape& shape = scene.shapes[si];
+    if (shape.is_mesh()) {
+      const Mesh& m = shape.mesh();
+      // Undirected edges with their triangles (welded topology).
+      std::unordered_map<uint64_t, std::vector<uint32_t>> edges;
+      for (uint32_t f = 0; f < m.triangle_count(); ++f)
+        for (int k = 0; k < 3; ++k) {
+          uint32_t a = m.indices[3 * f + k], b = m.indices[3 * f + (k + 1) % 3];
+          if (a > b) std::swap(a, b);
+          edges[(uint64_t(a) << 32) | b].push_back(f);
+        }
+      auto faces_eye = [&](uint32_t f) {
+        const Vec3 p0 = m.vertex(m.indices[3 * f]), p1 = m.vertex(m.indices[3 * f + 1]), p2 = m.vertex(m.indices[3 * f + 2]);
+        const Vec3d n = glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0));
+        return glm::dot(n, Vec3d(eye.x, eye.y, eye.z) - Vec3d(p0)) > 0.0;
+      };
+      auto face_normal = [&](uint32_t f) {
+        const Vec3 p0 = m.vertex(m.indices[3 * f]), p1 = m.vertex(m.indices[3 * f + 1]), p2 = m.vertex(m.indices[3 * f + 2]);
+        return glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
+      };
+      for (const auto& [key, faces] : edges) {
+        bool candidate = faces.size() != 2;  // boundary or non-manifold edges are always candidates
+        if (!candidate) candidate = faces_eye(faces[0]) != faces_eye(faces[1]);  // silhouette
+        // Flat shading: the radiance also jumps across a crease between two visible faces.
+        // (1e-6: cosine below which the faces count as coplanar, where the jump is zero.)
+        if (!candidate && m.face_normals) candidate = glm::dot(face_normal(faces[0]), face_normal(faces[1])) < 1.0 - 1e-6;
+        if (!candidate) continue;
+        const int a = int(key >> 32), b = int(key & 0xffffffffu);
+        Vec2d sa, sb;
+        if (!film_of(d3(m.vertex(a)), sa) || !film_of(d3(m.vertex(b)), sb)) {
+          ++m_skipped;  // limitation: edges crossing the near plane are skipped (and counted), not clipped
+          continue;
+        }
+        const float len = float(glm::length(sb - sa));
+        if (!(len > 0.0f)) continue;
+        m_curves.push_back({si, a, b, len});
+        weights.push_back(len);
+      }
+    } else {
+      const Sphere& s = shape.sphere();
+      ad::V3<double> q, e1, e2;
+      double rho;
+      if (!outline(d3(s.center), double(s.radius), eye, q, rho, e1, e2)) continue;
+      // Selection weight: the projected perimeter, from a 64-gon.
+      double len = 0;
+      Vec2d prev;
+      bool ok = true;
+      for (int i = 0; i <= 64 && ok; ++i) {
+        const double phi = 2 * M_PI * i / 64;
+        Vec2d cur;
+        ok = film_of(q + (e1 * std::cos(phi) + e2 * std::sin(phi)) * rho, cur);
+        if (i > 0) len += glm::length(cur - prev);
+        prev = cur;
+      }
+      if (!ok) {
+        ++m_skipped;
+        continue;
+      }
+      m_curves.push_back({si, -1, -1, float(len)});
+      weights.push_back(float(len));
+    }
+  }
+  if (!weights.empty()) m_select = Distribution1D(weights);
+}
+
+bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& delta_L, Var& normal_velocity,
+                             uint64_t& rays) const {
+  const Projection proj(m_scene.camera);
+  const ad::V3<double> eye = d3(m_scene.camera.world_from_camera.point(Vec3(0.0f)));
+  const size_t k = m_select.sample_discrete(rng.next_float());
+  const double pmf = m_select.pmf(k);
+  const float u = rng.next_float();
+  const SilhouetteCurve& c = m_curves[k];
+  const Shape& shape = m_scene.shapes[c.shape];
+
+  VV P;                    // the curve point as a function of the parameters
+  ad::V3<double> dP;       // d(point)/d(curve parameter)
+  double pdf_param;        // density of the curve parameter
+  if (shape.is_mesh()) {
+    const Mesh& m = shape.mesh();
+    const long slot = m_params.slot(Parameter::Kind::VertexPositions, c.shape);
+    auto vertex = [&](int i) {
+      const Vec3 v = m.vertex(uint32_t(i));
+      const long base = slot + 3 * long(i);
+      return VV(in.make(v.x, base), in.make(v.y, base + 1), in.make(v.z, base + 2));
+    };
+    const VV a = vertex(c.a), b = vertex(c.b);
+    P = a + (b - a) * Var(u);
+    dP = ad::values(b - a);
+    pdf_param = 1.0;
+  } else {
+    const Sphere& s = shape.sphere();
+    const long cs = m_params.slot(Parameter::Kind::SphereCenter, c.shape), rs = m_params.slot(Parameter::Kind::SphereRadius, c.shape);
+    const VV center = cs < 0 ? VV(Var(s.center.x), Var(s.center.y), Var(s.center.z))
+                             : VV(in.make(s.center.x, cs), in.make(s.center.y, cs + 1), in.make(s.center.z, cs + 2));
+    const Var r = in.make(s.radius, rs);
+    VV q, e1, e2;
+    Var rho;
+    if (!outline(center, r, eye, q, rho, e1, e2)) return false;
+    const double phi = 2 * M_PI * u;
+    P = q + (e1 * Var(std::cos(phi)) + e2 * Var(std::sin(phi))) * rho;
+    dP = (ad::values(e1) * -std::sin(phi) + ad::values(e2) * std::cos(phi)) * rho.v;
+    pdf_param = 1.0 / (2 * M_PI);
+  }
+
+  const ad::V3<Var> pc = proj.to_camera(P);
+  if (pc.z.v <= proj.near) return false;
+  Var fx, fy;
+  proj.film(pc, fx, fy);
+  if (!(fx.v >= 0 && fx.v < proj.W && fy.v >= 0 && fy.v < proj.H)) return false;
+  const Vec2d ds = proj.film_derivative(ad::values(pc), dP);
+  const double ds_len = glm::length(ds);
+  if (!(ds_len > 0.0)) return false;
+  const Vec2d n(-ds.y / ds_len, ds.x / ds_len);
+  const double pdf_length = pmf * pdf_param / ds_len;  // per unit of film length
+  pixel = int(fy.v) * int(proj.W) + int(fx.v);
+
+  // Radiance on both sides with the same random numbers.
+  PathCounters counters;
+  const Pcg32 rng_paths = rng;
+  Spectrum L[2];
+  for (int side = 0; side < 2; ++side) {
+    const double sign = side == 0 ? -1.0 : 1.0;
+    const Vec2 film(float(fx.v + sign * kProbeOffset * n.x), float(fy.v + sign * kProbeOffset * n.y));
+    Pcg32 r = rng_paths;
+    L[side] = path_radiance(m_scene, m_scene.camera.generate_ray(film), r, counters);
+  }
+  rays += counters.rays;
+  delta_L = (L[0] - L[1]) / float(pdf_length);
+  normal_velocity = fx * Var(n.x) + fy * Var(n.y);
+  return is_finite(delta_L);
+}
+
+}  // namespace limn
