@@ -69,7 +69,7 @@ def test_vertex_derivatives_match_fd(bsdf, smooth):
     scene = limn.load_dict(floor_scene(bsdf, smooth=smooth))
     t = {"floor.vertex_positions": random_z_tangent(scene, "floor.vertex_positions")}
     scene.set_differentiable(list(t))
-    with pytest.warns(UserWarning, match="boundary terms: NOT COMPUTED"):
+    with pytest.warns(UserWarning, match="indirect boundary: NOT COMPUTED"):
         fwd = scene.render_forward(t, seed=1)
     # Flat: the normal jumps that open between the faces at theta +- eps put an O(eps) error into
     # the finite difference itself (measured 7e-3 at eps 3e-3, 7e-4 at 3e-4), so it gets a smaller eps.
@@ -86,7 +86,7 @@ def test_moving_emitter_derivatives_match_fd():
     v = scene.params["lamp.vertex_positions"]
     t = {"lamp.vertex_positions": ((v - v.mean(0)) + np.float32([0.3, -0.2, 0.5])).astype(np.float32)}
     scene.set_differentiable(list(t))
-    with pytest.warns(UserWarning, match="boundary terms: NOT COMPUTED"):
+    with pytest.warns(UserWarning, match="indirect boundary: NOT COMPUTED"):
         fwd = scene.render_forward(t, seed=6)
     ref = limn.fd(scene, t, eps=1e-3, spp=32, seed=6, cache=False)
     assert np.abs(ref).mean() > 0.01
