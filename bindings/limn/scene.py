@@ -123,6 +123,7 @@ class Scene:
             raise ValueError(f"seed must be >= 0 (got {seed})")
         interior = spp_interior if spp_interior is not None else (spp or self.spp)
         spp_primary = spp_primary if spp_primary is not None else interior
+        spp_boundary = spp_boundary if spp_boundary is not None else interior
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
@@ -139,17 +140,18 @@ class Scene:
                 warnings.warn(f"{self._native.source}: {line}", stacklevel=3)
 
     def render_forward(self, tangents: dict, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
-                       spp_primary: int | None = None, spp_boundary: int = 0, guiding: str = "none", threads: int = 0,
+                       spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none", threads: int = 0,
                        progress=None) -> np.ndarray:
         """Derivative image d(image)/d(theta) along ``tangents`` ({name: array shaped like the
         parameter}; differentiable parameters that are not listed get a zero tangent).
 
         Terms: the interior term (``spp_interior`` paths per pixel, default ``spp`` or the scene's
         sampler) and the primary-visibility boundary term for silhouettes seen directly
-        (``spp_primary`` samples per pixel on average, default the same; 0 switches it off). The
-        indirect boundary term (shadows, silhouettes seen in reflections) is not implemented yet:
-        a warning says so when differentiable geometry could need it. ``last_stats["summary"]``
-        lists what was computed and what was skipped."""
+        (``spp_primary`` samples per pixel on average, default the same; 0 switches it off), and the
+        indirect boundary term for mesh edges: shadows and silhouettes seen in reflections
+        (``spp_boundary``, default the same; uniform sampling of edges and directions, the
+        unguided baseline). Spheres have no indirect boundary term yet: a warning says so.
+        ``last_stats["summary"]`` lists what was computed and what was skipped."""
         interior, primary, boundary = self._diff_options(spp, spp_interior, spp_primary, spp_boundary, guiding, seed)
         for n in tangents:
             if n not in self._differentiable:
@@ -168,7 +170,7 @@ class Scene:
         return image
 
     def render_backward(self, adjoint, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
-                        spp_primary: int | None = None, spp_boundary: int = 0, guiding: str = "none", threads: int = 0,
+                        spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none", threads: int = 0,
                         progress=None) -> dict:
         """Gradient of sum(adjoint * image) for every differentiable parameter, as {name: array
         shaped like the parameter}. ``adjoint`` is a (H, W, 3) array, e.g. dLoss/dImage.

@@ -1,6 +1,7 @@
 #include "core/diff/primary.h"
 
 #include <unordered_map>
+#include "core/diff/film_projection.h"
 #include "core/diff/local_derivatives.h"
 #include "core/render/integrators/path.h"
 
@@ -14,36 +15,6 @@ using Vec2d = glm::dvec2;
 // Offset of the two radiance probes from the curve, in pixels: far above the float resolution of
 // camera ray directions (~4e-5 px at 256 px across 40 degrees), far below any image feature.
 constexpr double kProbeOffset = 1e-3;
-
-struct Projection {
-  Mat4d camera_from_world;
-  double W, H, tan_x, tan_y, near;
-
-  explicit Projection(const Camera& c)
-      : camera_from_world(c.world_from_camera.inverse_matrix()), W(c.width), H(c.height), tan_x(c.tan_half_x),
-        tan_y(c.tan_half_y), near(c.near_clip) {}
-
-  template <typename T>
-  ad::V3<T> to_camera(const ad::V3<T>& p) const {
-    const Mat4d& m = camera_from_world;
-    return ad::V3<T>(T(m[0][0]) * p.x + T(m[1][0]) * p.y + T(m[2][0]) * p.z + T(m[3][0]),
-                     T(m[0][1]) * p.x + T(m[1][1]) * p.y + T(m[2][1]) * p.z + T(m[3][1]),
-                     T(m[0][2]) * p.x + T(m[1][2]) * p.y + T(m[2][2]) * p.z + T(m[3][2]));
-  }
-  // Film position (pixels) of a camera-space point, the inverse of Camera::generate_ray.
-  template <typename T>
-  void film(const ad::V3<T>& pc, T& fx, T& fy) const {
-    fx = T(0.5 * W) * (T(1.0) - pc.x / (pc.z * T(tan_x)));
-    fy = T(0.5 * H) * (T(1.0) - pc.y / (pc.z * T(tan_y)));
-  }
-  // d(film)/d(world point) applied to a world direction dp, at camera-space point pc.
-  Vec2d film_derivative(const ad::V3<double>& pc, const ad::V3<double>& dp_world) const {
-    const ad::V3<double> dpc = to_camera(dp_world) - to_camera(ad::V3<double>(0, 0, 0));
-    const double dfx = -0.5 * W / tan_x * (dpc.x / pc.z - pc.x * dpc.z / (pc.z * pc.z));
-    const double dfy = -0.5 * H / tan_y * (dpc.y / pc.z - pc.y * dpc.z / (pc.z * pc.z));
-    return Vec2d(dfx, dfy);
-  }
-};
 
 ad::V3<double> d3(const Vec3& v) { return ad::V3<double>(v.x, v.y, v.z); }
 
@@ -65,7 +36,7 @@ bool outline(const ad::V3<T>& c, const T& r, const ad::V3<double>& eye, ad::V3<T
 }  // namespace
 
 PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
-  const Projection proj(scene.camera);
+  const FilmProjection proj(scene.camera);
   const ad::V3<double> eye = d3(scene.camera.world_from_camera.point(Vec3(0.0f)));
   auto film_of = [&](const ad::V3<double>& p, Vec2d& s) {
     const auto pc = proj.to_camera(p);
@@ -144,7 +115,7 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) :
 
 bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& delta_L, Var& normal_velocity,
                              uint64_t& rays) const {
-  const Projection proj(m_scene.camera);
+  const FilmProjection proj(m_scene.camera);
   const ad::V3<double> eye = d3(m_scene.camera.world_from_camera.point(Vec3(0.0f)));
   const size_t k = m_select.sample_discrete(rng.next_float());
   const double pmf = m_select.pmf(k);

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <mutex>
 #include "core/diff/interior.h"
+#include "core/diff/indirect.h"
 #include "core/diff/primary.h"
 
 namespace limn {
@@ -43,13 +44,11 @@ void for_each_pixel(const Scene& scene, const DiffOptions& opt, PerPixel&& per_p
 
 void validate(const Scene& scene, const DiffParams& params, const DiffOptions& opt) {
   if (params.empty()) throw std::invalid_argument(scene.source + ": no differentiable parameters (call set_differentiable first)");
-  if (opt.spp_boundary != 0)
-    throw std::invalid_argument(scene.source + ": the indirect boundary term (spp_boundary) is not implemented yet; pass 0");
-  if (opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
+  if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
 }
 
 std::vector<std::string> summarize(const Scene& scene, const DiffParams& params, int spp, const DiffOptions& opt,
-                                   const PrimaryBoundary* primary) {
+                                   const PrimaryBoundary* primary, const IndirectBoundary* indirect) {
   std::vector<std::string> s;
   s.push_back("interior term: " + std::to_string(spp) + " paths per pixel, material-form replay");
   if (!params.any_geometry()) {
@@ -64,38 +63,54 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
     s.push_back("primary visibility: " + std::to_string(opt.spp_primary) + " samples per pixel over " +
                 std::to_string(primary->curve_count()) + " silhouette curves" +
                 (primary->skipped_edges() ? " (" + std::to_string(primary->skipped_edges()) + " edges crossing the near plane skipped)" : ""));
-  s.push_back("indirect boundary: NOT COMPUTED (not implemented yet): derivatives of shadows and of silhouettes seen "
-              "in reflections or through refraction are missing");
+  bool spheres = false;
+  for (int i : params.moving_shapes()) spheres |= !scene.shapes[i].is_mesh();
+  if (opt.spp_boundary == 0)
+    s.push_back("indirect boundary: switched off (spp_boundary = 0): derivatives of shadows and of silhouettes seen "
+                "in reflections are missing");
+  else if (!indirect || indirect->empty())
+    s.push_back("indirect boundary: skipped, the differentiable meshes have no edge that can be a silhouette");
+  else
+    s.push_back("indirect boundary: " + std::to_string(opt.spp_boundary) + " samples per pixel over " +
+                std::to_string(indirect->edge_count()) + " edges, guiding none (uniform)");
+  if (spheres && opt.spp_boundary > 0)
+    s.push_back("indirect boundary of spheres: NOT COMPUTED (the curvature term of Eq. 4 is not implemented yet): "
+                "shadows and reflections of moving spheres are missing");
   return s;
 }
 
-// Primary-visibility samples: spp_primary * pixels of them, spread by silhouette length.
-// visit(pixel, delta_L / N, inputs, normal_velocity) is called for every sample that lands.
-template <typename Visit>
-void for_each_primary_sample(const Scene& scene, const PrimaryBoundary& primary, const DiffOptions& opt,
-                             std::atomic<uint64_t>& rays, Visit&& visit) {
-  const uint64_t n = uint64_t(opt.spp_primary) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+// Boundary samples j = 0 .. n-1 in parallel blocks; fn(rng, inputs) per sample with the tape
+// cleared. Streams are seeded from (seed, tag, j), disjoint from the interior term's pixel streams.
+template <typename Fn>
+void for_each_boundary_sample(uint64_t n, uint64_t tag, const DiffOptions& opt, Fn&& fn) {
   constexpr uint64_t kBlock = 1024;
   tbb::task_arena arena(opt.threads > 0 ? opt.threads : tbb::task_arena::automatic);
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<uint64_t>(0, (n + kBlock - 1) / kBlock, 1), [&](const tbb::blocked_range<uint64_t>& r) {
       PathInputs in;
-      uint64_t local_rays = 0;
       for (uint64_t blk = r.begin(); blk != r.end(); ++blk)
         for (uint64_t j = blk * kBlock; j < std::min(n, (blk + 1) * kBlock); ++j) {
-          // Streams disjoint from the interior term's pixel streams.
-          Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ 0x7072696d61727921ULL), j);
+          Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ tag), j);
           ad::Tape::current().clear();
           in.clear();
-          int pixel;
-          Spectrum dL;
-          ad::Var vn;
-          if (!primary.sample(rng, in, pixel, dL, vn, local_rays) || vn.is_constant()) continue;
-          visit(pixel, dL / float(n), in, vn);
+          fn(rng, in);
         }
-      rays += local_rays;
     });
   });
+}
+
+constexpr uint64_t kPrimaryTag = 0x7072696d61727921ULL, kIndirectTag = 0x696e646972656374ULL;
+
+uint64_t samples_for(const Scene& scene, int per_pixel) {
+  return uint64_t(per_pixel) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+}
+
+// Tangent-weighted derivative of a tape variable.
+double directional(const ad::Var& v, const PathInputs& in, const std::vector<double>& tangent, std::vector<double>& adj) {
+  ad::Tape::current().backward(v.idx, 1.0, adj);
+  double d = 0;
+  for (const auto& [node, slot] : in.nodes) d += adj[node] * tangent[slot];
+  return d;
 }
 
 bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
@@ -151,31 +166,58 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     rays += counters.rays;
     invalid += bad;
   });
+  // Boundary terms splat into per-thread images.
+  tbb::enumerable_thread_specific<std::vector<double>> images(std::vector<double>(size_t(W) * H * 3, 0.0));
   std::unique_ptr<PrimaryBoundary> primary;
+  std::unique_ptr<IndirectBoundary> indirect;
   if (params.any_geometry() && opt.spp_primary > 0) {
     primary = std::make_unique<PrimaryBoundary>(scene, params);
-    if (!primary->empty()) {
-      tbb::enumerable_thread_specific<std::vector<double>> images(std::vector<double>(size_t(W) * H * 3, 0.0));
-      for_each_primary_sample(scene, *primary, opt, rays, [&](int pixel, const Spectrum& dL, const PathInputs& in, const ad::Var& vn) {
+    const uint64_t n = samples_for(scene, opt.spp_primary);
+    if (!primary->empty())
+      for_each_boundary_sample(n, kPrimaryTag, opt, [&](Pcg32& rng, PathInputs& in) {
+        int pixel;
+        Spectrum dL;
+        ad::Var vn;
+        uint64_t r = 0;
+        const bool ok = primary->sample(rng, in, pixel, dL, vn, r);
+        rays += r;
+        if (!ok || vn.is_constant()) return;
         std::vector<double> adj;
-        ad::Tape::current().backward(vn.idx, 1.0, adj);
-        double v = 0;
-        for (const auto& [node, slot] : in.nodes) v += adj[node] * tangent[slot];
+        const double v = directional(vn, in, tangent, adj);
         if (!std::isfinite(v)) return;
         std::vector<double>& im = images.local();
-        for (int c = 0; c < 3; ++c) im[3 * size_t(pixel) + c] += double(dL[c]) * v;
+        for (int c = 0; c < 3; ++c) im[3 * size_t(pixel) + c] += double(dL[c]) * v / double(n);
       });
-      for (const auto& im : images)
-        for (size_t i = 0; i < im.size(); ++i) img.rgb[i] += float(im[i]);
-    }
   }
+  if (params.any_geometry() && opt.spp_boundary > 0) {
+    indirect = std::make_unique<IndirectBoundary>(scene, params);
+    const uint64_t n = samples_for(scene, opt.spp_boundary);
+    if (!indirect->empty())
+      for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
+        std::vector<IndirectBoundary::Splat> splats;
+        std::vector<ad::Var> vel;
+        uint64_t r = 0;
+        indirect->sample(rng, in, splats, vel, r);
+        rays += r;
+        if (splats.empty()) return;
+        std::vector<double> adj, d(vel.size(), 0.0);
+        for (size_t i = 0; i < vel.size(); ++i) d[i] = vel[i].is_constant() ? 0.0 : directional(vel[i], in, tangent, adj);
+        std::vector<double>& im = images.local();
+        for (const auto& sp : splats) {
+          if (!std::isfinite(d[sp.velocity])) continue;
+          for (int c = 0; c < 3; ++c) im[3 * size_t(sp.pixel) + c] += double(sp.value[c]) * d[sp.velocity] / double(n);
+        }
+      });
+  }
+  for (const auto& im : images)
+    for (size_t i = 0; i < im.size(); ++i) img.rgb[i] += float(im[i]);
   ad::Tape::current().clear();
   if (stats) {
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     stats->paths = uint64_t(W) * H * spp;
     stats->rays = rays;
     stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp, opt, primary.get());
+    stats->summary = summarize(scene, params, spp, opt, primary.get(), indirect.get());
   }
   return img;
 }
@@ -225,19 +267,47 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     rays += counters.rays;
     invalid += bad;
   });
+  auto scatter = [&](const ad::Var& v, double weight, const PathInputs& in) {
+    if (weight == 0.0 || v.is_constant()) return;
+    std::vector<double> adj;
+    ad::Tape::current().backward(v.idx, weight, adj);
+    if (!finite_adjoints(adj, in)) return;
+    std::vector<double>& g = grads.local();
+    for (const auto& [node, slot] : in.nodes) g[slot] += adj[node];
+  };
+  auto adjoint_dot = [&](int pixel, const Spectrum& v) {
+    const float* a = &adjoint.rgb[3 * size_t(pixel)];
+    return double(a[0]) * v.x + double(a[1]) * v.y + double(a[2]) * v.z;
+  };
   std::unique_ptr<PrimaryBoundary> primary;
+  std::unique_ptr<IndirectBoundary> indirect;
   if (params.any_geometry() && opt.spp_primary > 0) {
     primary = std::make_unique<PrimaryBoundary>(scene, params);
+    const uint64_t n = samples_for(scene, opt.spp_primary);
     if (!primary->empty())
-      for_each_primary_sample(scene, *primary, opt, rays, [&](int pixel, const Spectrum& dL, const PathInputs& in, const ad::Var& vn) {
-        const float* a = &adjoint.rgb[3 * size_t(pixel)];
-        const double w = double(a[0]) * dL.x + double(a[1]) * dL.y + double(a[2]) * dL.z;
-        if (w == 0.0) return;
-        std::vector<double> adj;
-        ad::Tape::current().backward(vn.idx, w, adj);
-        if (!finite_adjoints(adj, in)) return;
-        std::vector<double>& g = grads.local();
-        for (const auto& [node, slot] : in.nodes) g[slot] += adj[node];
+      for_each_boundary_sample(n, kPrimaryTag, opt, [&](Pcg32& rng, PathInputs& in) {
+        int pixel;
+        Spectrum dL;
+        ad::Var vn;
+        uint64_t r = 0;
+        const bool ok = primary->sample(rng, in, pixel, dL, vn, r);
+        rays += r;
+        if (ok) scatter(vn, adjoint_dot(pixel, dL) / double(n), in);
+      });
+  }
+  if (params.any_geometry() && opt.spp_boundary > 0) {
+    indirect = std::make_unique<IndirectBoundary>(scene, params);
+    const uint64_t n = samples_for(scene, opt.spp_boundary);
+    if (!indirect->empty())
+      for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
+        std::vector<IndirectBoundary::Splat> splats;
+        std::vector<ad::Var> vel;
+        uint64_t r = 0;
+        indirect->sample(rng, in, splats, vel, r);
+        rays += r;
+        std::vector<double> w(vel.size(), 0.0);
+        for (const auto& sp : splats) w[sp.velocity] += adjoint_dot(sp.pixel, sp.value) / double(n);
+        for (size_t i = 0; i < vel.size(); ++i) scatter(vel[i], w[i], in);
       });
   }
   ad::Tape::current().clear();
@@ -249,7 +319,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     stats->paths = uint64_t(W) * H * spp;
     stats->rays = rays;
     stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp, opt, primary.get());
+    stats->summary = summarize(scene, params, spp, opt, primary.get(), indirect.get());
   }
   return total;
 }

@@ -1,9 +1,10 @@
 // render_forward / render_backward: derivative images and parameter gradients.
 //
-// Implemented: the interior term (interior.h) for every parameter kind and the primary-visibility
-// boundary term (primary.h) for meshes and spheres. Not implemented yet: the indirect boundary
-// term (shadows and silhouettes seen in reflections: projective-sampling paper Eq. 4); when
-// differentiable geometry could create such discontinuities the summary says they are missing.
+// Implemented: the interior term (interior.h) for every parameter kind, the primary-visibility
+// boundary term (primary.h) for meshes and spheres, and the perimeter part of the indirect
+// boundary term (indirect.h: shadows and silhouettes seen in reflections) for meshes, unguided.
+// Not implemented yet: the indirect term of spheres (curvature part of Eq. 4) and guiding; the
+// summary says what was computed and what is missing.
 #pragma once
 #include <functional>
 #include <string>
@@ -16,7 +17,7 @@ namespace limn {
 struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
   int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
-  int spp_boundary = 0;   // indirect boundary samples (not implemented: must be 0)
+  int spp_boundary = 0;   // indirect boundary samples, per pixel on average (0: off)
   uint64_t seed = 0;
   int threads = 0;
   std::function<bool(float)> progress;

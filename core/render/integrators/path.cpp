@@ -37,9 +37,11 @@ Spectrum estimate_direct(const Scene& scene, const SurfaceInteraction& si, const
 
 }  // namespace
 
-Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, PathCounters& counters) {
+Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, PathCounters& counters, const PathLimits& limits) {
   const IntegratorSettings& cfg = scene.integrator;
-  if (cfg.max_depth == 0) return Spectrum(0.0f);  // Mitsuba: no segments, no light
+  const int max_depth = limits.max_depth;
+  const bool hide = cfg.hide_emitters && limits.camera_ray;
+  if (max_depth == 0) return Spectrum(0.0f);  // Mitsuba: no segments, no light
   Spectrum L(0.0f), beta(1.0f);
   Ray ray = camera_ray;
   float prev_pdf = 0.0f;    // solid-angle pdf of the BSDF sample that produced `ray`
@@ -51,7 +53,7 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     SurfaceInteraction si;
     counters.rays++;
     if (!scene.intersect(ray, si)) {
-      if (depth == 0 && cfg.hide_emitters) break;
+      if (depth == 0 && hide) break;
       for (int idx : scene.infinite_emitters) {
         const Emitter& e = scene.emitters[idx];
         const Spectrum Le = eval_infinite(e, ray.d);
@@ -62,7 +64,7 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     }
 
     // Emission from an area emitter that was hit.
-    if (emits_towards(scene, si, ray.d) && !(depth == 0 && cfg.hide_emitters)) {
+    if (emits_towards(scene, si, ray.d) && !(depth == 0 && hide)) {
       float w = 1.0f;
       if (!prev_delta && cfg.emitter_sampling) {
         const int ei = scene.shapes[si.shape].emitter;
@@ -74,7 +76,7 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     }
 
     // A path of depth + 2 segments is the next one NEE or BSDF sampling would make.
-    if (cfg.max_depth >= 0 && depth + 2 > cfg.max_depth) break;
+    if (max_depth >= 0 && depth + 2 > max_depth) break;
 
     const Shape& shape = scene.shapes[si.shape];
     const Bsdf& bsdf = scene.bsdfs[shape.bsdf];

@@ -11,7 +11,19 @@ struct PathCounters {
   uint64_t rays = 0;     // intersection and shadow rays traced
 };
 
-// Radiance arriving at the camera along `ray`.
-Spectrum path_radiance(const Scene& scene, const Ray& ray, Pcg32& rng, PathCounters& counters);
+// Where a path starts and how long it may grow (segments, Mitsuba's max_depth; -1 unbounded).
+// hide_emitters applies to camera rays only.
+struct PathLimits {
+  int max_depth;
+  bool camera_ray;
+};
+
+// Radiance arriving along `ray` (towards its origin).
+Spectrum path_radiance(const Scene& scene, const Ray& ray, Pcg32& rng, PathCounters& counters, const PathLimits& limits);
+
+// Radiance arriving at the camera along a camera ray, with the scene's integrator settings.
+inline Spectrum path_radiance(const Scene& scene, const Ray& ray, Pcg32& rng, PathCounters& counters) {
+  return path_radiance(scene, ray, rng, counters, PathLimits{scene.integrator.max_depth, true});
+}
 
 }  // namespace limn

@@ -1,0 +1,109 @@
+"""Indirect boundary term (perimeter of mesh edges, projective-sampling paper Eq. 4), unguided:
+shadows of a moving occluder and its silhouette seen in a glossy reflection."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import limn
+from conftest import camera
+from test_derivatives import block_z
+
+
+def quiet(fn, *args, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*args, **kw)
+
+
+def shadow_scene(light):
+    return {"type": "scene", "integrator": {"type": "direct"},
+            "sensor": camera((0, -0.01, 5), (0, 0, 0), fov=45, width=16, height=16, spp=64),
+            "floor": {"type": "rectangle", "to_world": {"scale": 4}, "bsdf": {"type": "diffuse", "reflectance": 0.6}},
+            "box": {"type": "cube", "to_world": [{"scale": 0.3}, {"translate": [0.4, 0.2, 1.2]}],
+                    "bsdf": {"type": "diffuse", "reflectance": 0.4}},
+            "lamp": light}
+
+
+POINT = {"type": "point", "position": [0.6, 0.6, 4.0], "intensity": 30.0}
+AREA = {"type": "rectangle", "to_world": [{"rotate": {"axis": [1, 0, 0], "angle": 180}}, {"translate": [0.6, 0.6, 3.0]}],
+        "emitter": {"type": "area", "radiance": 10.0}}
+
+
+def compare(scene, name, t, spp_boundary, seeds=4, fd_spp=1024):
+    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=fd_spp, seed=k, cache=False) for k in range(seeds)])
+    on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=spp_boundary, seed=50 + k) for k in range(seeds)])
+    off = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=0, seed=50 + k) for k in range(seeds)])
+    return block_z(on, fd), block_z(off, fd)
+
+
+@pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
+def test_moving_occluder_shadow(light, spp_boundary):
+    scene = limn.load_dict(shadow_scene(light))
+    name = "box.vertex_positions"
+    t = np.zeros_like(scene.params[name])
+    t[:, 0] = 1.0
+    scene.set_differentiable([name])
+    z_on, z_off = compare(scene, name, t, spp_boundary)
+    assert np.abs(z_on).max() < 4.5, z_on
+    assert np.abs(z_off).max() > 10, z_off  # the shadow's blocks are far off without the term
+    quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=spp_boundary)
+    assert any("indirect boundary: " + str(spp_boundary) in line for line in scene.last_stats["summary"])
+
+
+def glossy_scene(emitter_reflectance):
+    return {"type": "scene", "integrator": {"type": "path", "max_depth": 3},
+         "sensor": camera((0, -3, 0.6), (0, 0, 0.4), fov=40, width=16, height=16, spp=64),
+         "plane": {"type": "rectangle", "to_world": {"scale": 3},
+                   "bsdf": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}},
+         "emitter": {"type": "rectangle", "to_world": [{"scale": [3, 1.5, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 90}},
+                                                      {"translate": [0, 2.5, 1.2]}],
+                     "bsdf": {"type": "diffuse", "reflectance": emitter_reflectance},
+                     "emitter": {"type": "area", "radiance": 2.0}},
+         "shape": {"type": "cube", "to_world": [{"scale": 0.25}, {"rotate": {"axis": [0, 0, 1], "angle": 30}}, {"translate": [0.1, 1.0, 0.7]}],
+                   "bsdf": {"type": "diffuse", "reflectance": 0.1}}}
+
+
+@pytest.mark.parametrize("emitter_reflectance", [
+    0.0,
+    pytest.param(0.5, marks=pytest.mark.xfail(strict=True, reason=(
+        "known bias, not found yet: where the camera sees the diffuse emitter surface reflecting the "
+        "moving shape, the indirect term is off by ~1e-3 of the image derivative's peak (FD at 16k spp); "
+        "see the issue note"))),
+])
+def test_silhouette_seen_in_a_glossy_reflection(emitter_reflectance):
+    """The paper's test scene (a shape in front of a large area emitter, seen in a rough conductor
+    plane), at alpha = 0.2: at 0.005 uniform sampling of directions is hopeless, that needs guiding."""
+    scene = limn.load_dict(glossy_scene(emitter_reflectance))
+    name = "shape.vertex_positions"
+    t = np.zeros_like(scene.params[name])
+    t[:, 0] = 1.0
+    scene.set_differentiable([name])
+    z_on, z_off = compare(scene, name, t, 512)
+    assert np.abs(z_on).max() < 4.5, z_on
+    assert np.abs(z_off).max() > 6, z_off
+
+
+def test_backward_matches_forward_with_all_terms():
+    scene = limn.load_dict(shadow_scene(AREA))
+    names = ["box.vertex_positions", "box.reflectance"]
+    scene.set_differentiable(names)
+    rng = np.random.default_rng(8)
+    t = {n: rng.normal(size=scene.params[n].shape).astype(np.float32) for n in names}
+    adjoint = rng.normal(size=(16, 16, 3)).astype(np.float32)
+    fwd = quiet(scene.render_forward, t, spp=16, spp_boundary=64, seed=9)
+    grads = quiet(scene.render_backward, adjoint, spp=16, spp_boundary=64, seed=9)
+    lhs = float((adjoint.astype(np.float64) * fwd).sum())
+    rhs = sum(float((grads[n].astype(np.float64) * t[n]).sum()) for n in names)
+    assert abs(lhs - rhs) <= 1e-3 * abs(rhs), (lhs, rhs)
+
+
+def test_spheres_say_what_is_missing():
+    d = shadow_scene(POINT)
+    d["ball"] = {"type": "sphere", "center": [-0.5, 0, 1], "radius": 0.3}
+    scene = limn.load_dict(d)
+    scene.set_differentiable(["ball.center"])
+    with pytest.warns(UserWarning, match="indirect boundary of spheres: NOT COMPUTED"):
+        scene.render_forward({"ball.center": np.float32([1, 0, 0])}, spp=4)
