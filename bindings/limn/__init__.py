@@ -14,6 +14,7 @@ from ._core import RenderCancelled
 from .scene import Parameters, Scene, load, load_dict
 from .images import read_image, write_image, write_ply
 from .fd import fd
+from . import optim
 
 __version__ = "0.1.0"
-__all__ = ["Scene", "Parameters", "load", "load_dict", "read_image", "write_image", "write_ply", "fd", "RenderCancelled"]
+__all__ = ["Scene", "Parameters", "load", "load_dict", "read_image", "write_image", "write_ply", "fd", "optim", "RenderCancelled"]

@@ -37,6 +37,15 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_demo(args: argparse.Namespace) -> int:
+    from . import demo
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the summary lines about the sphere-free scene are not news here
+        summary = demo.run(out=args.output, iterations=args.iterations, spp=args.spp)
+    return 0 if summary["final_loss"] < summary["initial_loss"] else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python3 -m limn", description="limn differentiable renderer")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -48,6 +57,11 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--threads", type=int, default=0, help="worker threads (0: all cores)")
     r.add_argument("--no-preview", action="store_true", help="do not write a .png next to an .exr/.hdr output")
     r.set_defaults(func=cmd_render)
+    d = sub.add_parser("demo", help="inverse shape optimisation demo: recover a bumpy shape from three images")
+    d.add_argument("-o", "--output", default="out/demo", help="folder for the result (PLY, renders, history.json)")
+    d.add_argument("--iterations", type=int, default=80)
+    d.add_argument("--spp", type=int, default=8)
+    d.set_defaults(func=cmd_demo)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

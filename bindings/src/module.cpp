@@ -11,6 +11,7 @@
 #include "core/io/image_io.h"
 #include "core/io/mesh_io.h"
 #include "core/io/scene_loader.h"
+#include "core/optim/large_steps.h"
 #include "core/render/render.h"
 
 namespace py = pybind11;
@@ -243,4 +244,35 @@ PYBIND11_MODULE(_core, m) {
         write_ply(path, std::vector<float>(v.data(), v.data() + v.size()), std::vector<uint32_t>(f.data(), f.data() + f.size()));
       }, py::arg("path"), py::arg("positions"), py::arg("faces"));
   m.def("embree_error_count", &EmbreeDevice::error_count);
+
+  using Rows = py::array_t<double, py::array::c_style | py::array::forcecast>;
+  auto check_rows = [](const LargeSteps& ls, const Rows& a, const char* what) {
+    if (a.ndim() != 2 || a.shape(1) != 3 || size_t(a.shape(0)) != ls.vertex_count())
+      throw std::invalid_argument(std::string("LargeSteps: ") + what + " must have shape (" + std::to_string(ls.vertex_count()) + ", 3)");
+  };
+  py::class_<LargeSteps>(m, "LargeSteps")
+      .def(py::init([](py::array_t<int64_t, py::array::c_style | py::array::forcecast> faces, size_t n, double lambda) {
+             if (faces.ndim() != 2 || faces.shape(1) != 3) throw std::invalid_argument("LargeSteps: faces must have shape (F, 3)");
+             std::vector<uint32_t> f(size_t(faces.size()));
+             for (py::ssize_t i = 0; i < faces.size(); ++i) {
+               if (faces.data()[i] < 0) throw std::invalid_argument("LargeSteps: negative face index");
+               f[size_t(i)] = uint32_t(faces.data()[i]);
+             }
+             return LargeSteps(f, n, lambda);
+           }), py::arg("faces"), py::arg("vertex_count"), py::arg("lambda_"))
+      .def("to_u", [check_rows](const LargeSteps& ls, const Rows& x) {
+        check_rows(ls, x, "x");
+        Rows u({py::ssize_t(ls.vertex_count()), py::ssize_t(3)});
+        ls.to_u(x.data(), u.mutable_data());
+        return u;
+      })
+      .def("from_u", [check_rows](const LargeSteps& ls, const Rows& u) {
+        check_rows(ls, u, "u");
+        Rows x({py::ssize_t(ls.vertex_count()), py::ssize_t(3)});
+        {
+          py::gil_scoped_release release;
+          ls.from_u(u.data(), x.mutable_data());
+        }
+        return x;
+      });
 }

@@ -61,8 +61,10 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) :
         }
       auto faces_eye = [&](uint32_t f) {
         const Vec3 p0 = m.vertex(m.indices[3 * f]), p1 = m.vertex(m.indices[3 * f + 1]), p2 = m.vertex(m.indices[3 * f + 2]);
-        const Vec3d n = glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0));
-        return glm::dot(n, Vec3d(eye.x, eye.y, eye.z) - Vec3d(p0)) > 0.0;
+        const Vec3d n = glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
+        // Front-facing with a margin: a face within 1e-6 (cosine) of edge-on projects to no area
+        // whichever way rounding tips it, and must not make a second outline next to the real one.
+        return glm::dot(n, glm::normalize(Vec3d(eye.x, eye.y, eye.z) - Vec3d(p0))) > 1e-6;
       };
       auto face_normal = [&](uint32_t f) {
         const Vec3 p0 = m.vertex(m.indices[3 * f]), p1 = m.vertex(m.indices[3 * f + 1]), p2 = m.vertex(m.indices[3 * f + 2]);
@@ -71,9 +73,12 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) :
       for (const auto& [key, faces] : edges) {
         bool candidate = faces.size() != 2;  // boundary or non-manifold edges are always candidates
         if (!candidate) candidate = faces_eye(faces[0]) != faces_eye(faces[1]);  // silhouette
-        // Flat shading: the radiance also jumps across a crease between two visible faces.
-        // (1e-6: cosine below which the faces count as coplanar, where the jump is zero.)
-        if (!candidate && m.face_normals) candidate = glm::dot(face_normal(faces[0]), face_normal(faces[1])) < 1.0 - 1e-6;
+        // Flat shading: the radiance also jumps across a crease between two faces that both face
+        // the camera (1e-6: cosine below which the faces count as coplanar, where the jump is zero).
+        // Creases with a back-facing face are hidden or are silhouettes already; including them
+        // would count an outline twice where a face is seen exactly edge-on.
+        if (!candidate && m.face_normals && faces_eye(faces[0]) && faces_eye(faces[1]))
+          candidate = glm::dot(face_normal(faces[0]), face_normal(faces[1])) < 1.0 - 1e-6;
         if (!candidate) continue;
         const int a = int(key >> 32), b = int(key & 0xffffffffu);
         Vec2d sa, sb;

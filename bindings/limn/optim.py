@@ -1,0 +1,125 @@
+"""Optimisation: Adam, the Large-Steps preconditioner for meshes, image losses, a multi-view loop.
+
+    views = [(scene_a, target_a), (scene_b, target_b)]     # scenes that share the parameter name
+    result = limn.optim.fit(views, "shape.vertex_positions", iterations=100, lr=0.02, lambda_=20)
+
+Large Steps (Nicolet et al. 2021) optimises u = (I + lambda L) x instead of the vertices x; the
+gradient with respect to u is (I + lambda L)^-1 times the gradient with respect to x, computed with
+a sparse Cholesky factorisation in the C++ core (Eigen)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core
+
+
+class Adam:
+    """Adam (Kingma and Ba 2015) on one array, updated in place."""
+
+    def __init__(self, x: np.ndarray, lr: float = 1e-2, betas=(0.9, 0.999), eps: float = 1e-8):
+        if not lr > 0:
+            raise ValueError(f"Adam: lr must be > 0 (got {lr})")
+        self.x, self.lr, self.b1, self.b2, self.eps = x, lr, betas[0], betas[1], eps
+        self.m = np.zeros_like(x, dtype=np.float64)
+        self.v = np.zeros_like(x, dtype=np.float64)
+        self.t = 0
+
+    def step(self, grad: np.ndarray) -> None:
+        g = np.asarray(grad, dtype=np.float64)
+        if g.shape != self.x.shape:
+            raise ValueError(f"Adam: gradient shape {g.shape} != parameter shape {self.x.shape}")
+        if not np.isfinite(g).all():
+            raise ValueError("Adam: the gradient has non-finite values")
+        self.t += 1
+        self.m = self.b1 * self.m + (1 - self.b1) * g
+        self.v = self.b2 * self.v + (1 - self.b2) * g * g
+        m_hat = self.m / (1 - self.b1 ** self.t)
+        v_hat = self.v / (1 - self.b2 ** self.t)
+        self.x -= (self.lr * m_hat / (np.sqrt(v_hat) + self.eps)).astype(self.x.dtype)
+
+
+class LargeSteps:
+    """u = (I + lambda L) x and back, for a mesh's vertices x (N x 3) and faces (F x 3)."""
+
+    def __init__(self, faces, vertex_count: int, lambda_: float):
+        self._native = _core.LargeSteps(np.asarray(faces, dtype=np.int64), int(vertex_count), float(lambda_))
+
+    def to_u(self, x) -> np.ndarray:
+        return self._native.to_u(np.asarray(x, dtype=np.float64))
+
+    def from_u(self, u) -> np.ndarray:
+        return self._native.from_u(np.asarray(u, dtype=np.float64))
+
+    def gradient_u(self, grad_x) -> np.ndarray:
+        """dLoss/du from dLoss/dx (M is symmetric: M^-T = M^-1)."""
+        return self.from_u(grad_x)
+
+
+def l2(image: np.ndarray, target: np.ndarray):
+    """Mean squared error and its derivative with respect to the image."""
+    d = image.astype(np.float64) - target
+    return float((d * d).mean()), (2.0 * d / d.size).astype(np.float32)
+
+
+def l1(image: np.ndarray, target: np.ndarray):
+    """Mean absolute error and its derivative with respect to the image."""
+    d = image.astype(np.float64) - target
+    return float(np.abs(d).mean()), (np.sign(d) / d.size).astype(np.float32)
+
+
+@dataclass
+class FitResult:
+    losses: list = field(default_factory=list)
+    seconds: list = field(default_factory=list)   # elapsed time at each iteration
+    cancelled: bool = False
+
+
+def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: float = 20.0, loss=l2, spp: int = 8,
+        spp_primary: int | None = None, spp_boundary: int | None = None, mask=None, faces=None, callback=None,
+        seed: int = 0) -> FitResult:
+    """Optimise the vertex positions ``name`` (shared by every scene in ``views``, a list of
+    (scene, target image) pairs) to match the targets. ``faces`` (F x 3) enables Large Steps with
+    ``lambda_`` (0 disables it); ``mask`` (N,) of 0/1 holds vertices with 0 fixed.
+    ``callback(iteration, loss, vertices)`` may return False to stop (the last good state stays)."""
+    if not views:
+        raise ValueError("fit: no views")
+    scenes = [s for s, _ in views]
+    for s, target in views:
+        if target.shape != (s.height, s.width, 3):
+            raise ValueError(f"fit: target shape {target.shape} != film {(s.height, s.width, 3)}")
+        s.set_differentiable([name])
+    x = scenes[0].params[name].astype(np.float64)
+    keep = None if mask is None else np.asarray(mask, dtype=np.float64).reshape(-1, 1)
+    precond = LargeSteps(faces, len(x), lambda_) if faces is not None and lambda_ > 0 else None
+    u = precond.to_u(x) if precond else x.copy()
+    opt = Adam(u, lr=lr)
+    result = FitResult()
+    t0 = time.perf_counter()
+    for it in range(iterations):
+        grad = np.zeros_like(x)
+        total = 0.0
+        for k, (s, target) in enumerate(views):
+            img = s.render(spp=spp, seed=seed + 7919 * it + k)
+            value, adjoint = loss(img, target)
+            total += value
+            g = s.render_backward(adjoint, spp=spp, spp_primary=spp_primary, spp_boundary=spp_boundary,
+                                  seed=seed + 104729 * it + k)
+            grad += g[name]
+        if keep is not None:
+            grad *= keep
+        result.losses.append(total / len(views))
+        result.seconds.append(time.perf_counter() - t0)
+        if callback is not None and callback(it, result.losses[-1], x) is False:
+            result.cancelled = True
+            break
+        opt.step(precond.gradient_u(grad) if precond else grad)
+        x_new = precond.from_u(u) if precond else u
+        if keep is not None:
+            x_new = np.where(keep > 0, x_new, x)
+        x = x_new
+        for s in scenes:
+            s.params[name] = x.astype(np.float32)
+    return result
