@@ -46,6 +46,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0 if summary["final_loss"] < summary["initial_loss"] else 1
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from . import bench
+    md = bench.run(args.scene, args.param, args.methods.split(","), args.budgets, args.fd_spp, args.eps, args.out,
+                   tangent=args.tangent, argv=args.argv)
+    print(f"wrote {os.path.abspath(md)}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python3 -m limn", description="limn differentiable renderer")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -62,7 +70,18 @@ def main(argv: list[str] | None = None) -> int:
     d.add_argument("--iterations", type=int, default=80)
     d.add_argument("--spp", type=int, default=8)
     d.set_defaults(func=cmd_demo)
+    b = sub.add_parser("bench", help="gradient error against run time, against a finite-difference reference")
+    b.add_argument("scene")
+    b.add_argument("--param", required=True, help="parameter name, e.g. box.vertex_positions")
+    b.add_argument("--tangent", default="x", choices=["x", "ones"], help="x: translate along x; ones: all ones")
+    b.add_argument("--methods", default="interior,primary,full")
+    b.add_argument("--budgets", type=int, nargs="+", default=[4, 16, 64])
+    b.add_argument("--fd-spp", type=int, default=4096)
+    b.add_argument("--eps", type=float, default=1e-2)
+    b.add_argument("--out", default="docs/reports")
+    b.set_defaults(func=cmd_bench)
     args = parser.parse_args(argv)
+    args.argv = list(argv if argv is not None else sys.argv[1:])
     try:
         return args.func(args)
     except ValueError as e:

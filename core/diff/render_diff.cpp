@@ -119,6 +119,53 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
   return true;
 }
 
+// The boundary terms that are switched on, built for this call (kept for the summary).
+struct BoundaryTerms {
+  std::unique_ptr<PrimaryBoundary> primary;
+  std::unique_ptr<IndirectBoundary> indirect;
+};
+
+// Runs every enabled boundary term. visit(inputs, splats, velocities) is called once per sample:
+// the sample adds splat.value * d(velocities[splat.velocity]) to splat.pixel, values already
+// divided by the term's sample count.
+template <typename Visit>
+BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, const DiffOptions& opt,
+                                 std::atomic<uint64_t>& rays, Visit&& visit) {
+  BoundaryTerms terms;
+  if (!params.any_geometry()) return terms;
+  if (opt.spp_primary > 0) {
+    terms.primary = std::make_unique<PrimaryBoundary>(scene, params);
+    const uint64_t n = samples_for(scene, opt.spp_primary);
+    if (!terms.primary->empty())
+      for_each_boundary_sample(n, kPrimaryTag, opt, [&](Pcg32& rng, PathInputs& in) {
+        int pixel;
+        Spectrum dL;
+        ad::Var vn;
+        uint64_t r = 0;
+        const bool ok = terms.primary->sample(rng, in, pixel, dL, vn, r);
+        rays += r;
+        if (!ok || vn.is_constant()) return;
+        visit(in, std::vector<IndirectBoundary::Splat>{{pixel, dL / float(n), 0}}, std::vector<ad::Var>{vn});
+      });
+  }
+  if (opt.spp_boundary > 0) {
+    terms.indirect = std::make_unique<IndirectBoundary>(scene, params);
+    const uint64_t n = samples_for(scene, opt.spp_boundary);
+    if (!terms.indirect->empty())
+      for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
+        std::vector<IndirectBoundary::Splat> splats;
+        std::vector<ad::Var> vel;
+        uint64_t r = 0;
+        terms.indirect->sample(rng, in, splats, vel, r);
+        rays += r;
+        if (splats.empty()) return;
+        for (auto& sp : splats) sp.value /= float(n);
+        visit(in, splats, vel);
+      });
+  }
+  return terms;
+}
+
 }  // namespace
 
 Image render_forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent,
@@ -168,47 +215,16 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
   });
   // Boundary terms splat into per-thread images.
   tbb::enumerable_thread_specific<std::vector<double>> images(std::vector<double>(size_t(W) * H * 3, 0.0));
-  std::unique_ptr<PrimaryBoundary> primary;
-  std::unique_ptr<IndirectBoundary> indirect;
-  if (params.any_geometry() && opt.spp_primary > 0) {
-    primary = std::make_unique<PrimaryBoundary>(scene, params);
-    const uint64_t n = samples_for(scene, opt.spp_primary);
-    if (!primary->empty())
-      for_each_boundary_sample(n, kPrimaryTag, opt, [&](Pcg32& rng, PathInputs& in) {
-        int pixel;
-        Spectrum dL;
-        ad::Var vn;
-        uint64_t r = 0;
-        const bool ok = primary->sample(rng, in, pixel, dL, vn, r);
-        rays += r;
-        if (!ok || vn.is_constant()) return;
-        std::vector<double> adj;
-        const double v = directional(vn, in, tangent, adj);
-        if (!std::isfinite(v)) return;
-        std::vector<double>& im = images.local();
-        for (int c = 0; c < 3; ++c) im[3 * size_t(pixel) + c] += double(dL[c]) * v / double(n);
-      });
-  }
-  if (params.any_geometry() && opt.spp_boundary > 0) {
-    indirect = std::make_unique<IndirectBoundary>(scene, params);
-    const uint64_t n = samples_for(scene, opt.spp_boundary);
-    if (!indirect->empty())
-      for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
-        std::vector<IndirectBoundary::Splat> splats;
-        std::vector<ad::Var> vel;
-        uint64_t r = 0;
-        indirect->sample(rng, in, splats, vel, r);
-        rays += r;
-        if (splats.empty()) return;
-        std::vector<double> adj, d(vel.size(), 0.0);
-        for (size_t i = 0; i < vel.size(); ++i) d[i] = vel[i].is_constant() ? 0.0 : directional(vel[i], in, tangent, adj);
-        std::vector<double>& im = images.local();
-        for (const auto& sp : splats) {
-          if (!std::isfinite(d[sp.velocity])) continue;
-          for (int c = 0; c < 3; ++c) im[3 * size_t(sp.pixel) + c] += double(sp.value[c]) * d[sp.velocity] / double(n);
-        }
-      });
-  }
+  const BoundaryTerms terms = run_boundary_terms(scene, params, opt, rays, [&](const PathInputs& in,
+      const std::vector<IndirectBoundary::Splat>& splats, const std::vector<ad::Var>& vel) {
+    std::vector<double> adj, d(vel.size(), 0.0);
+    for (size_t i = 0; i < vel.size(); ++i) d[i] = vel[i].is_constant() ? 0.0 : directional(vel[i], in, tangent, adj);
+    std::vector<double>& im = images.local();
+    for (const auto& sp : splats) {
+      if (!std::isfinite(d[sp.velocity])) continue;
+      for (int c = 0; c < 3; ++c) im[3 * size_t(sp.pixel) + c] += double(sp.value[c]) * d[sp.velocity];
+    }
+  });
   for (const auto& im : images)
     for (size_t i = 0; i < im.size(); ++i) img.rgb[i] += float(im[i]);
   ad::Tape::current().clear();
@@ -217,7 +233,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     stats->paths = uint64_t(W) * H * spp;
     stats->rays = rays;
     stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp, opt, primary.get(), indirect.get());
+    stats->summary = summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get());
   }
   return img;
 }
@@ -279,37 +295,12 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     const float* a = &adjoint.rgb[3 * size_t(pixel)];
     return double(a[0]) * v.x + double(a[1]) * v.y + double(a[2]) * v.z;
   };
-  std::unique_ptr<PrimaryBoundary> primary;
-  std::unique_ptr<IndirectBoundary> indirect;
-  if (params.any_geometry() && opt.spp_primary > 0) {
-    primary = std::make_unique<PrimaryBoundary>(scene, params);
-    const uint64_t n = samples_for(scene, opt.spp_primary);
-    if (!primary->empty())
-      for_each_boundary_sample(n, kPrimaryTag, opt, [&](Pcg32& rng, PathInputs& in) {
-        int pixel;
-        Spectrum dL;
-        ad::Var vn;
-        uint64_t r = 0;
-        const bool ok = primary->sample(rng, in, pixel, dL, vn, r);
-        rays += r;
-        if (ok) scatter(vn, adjoint_dot(pixel, dL) / double(n), in);
-      });
-  }
-  if (params.any_geometry() && opt.spp_boundary > 0) {
-    indirect = std::make_unique<IndirectBoundary>(scene, params);
-    const uint64_t n = samples_for(scene, opt.spp_boundary);
-    if (!indirect->empty())
-      for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
-        std::vector<IndirectBoundary::Splat> splats;
-        std::vector<ad::Var> vel;
-        uint64_t r = 0;
-        indirect->sample(rng, in, splats, vel, r);
-        rays += r;
-        std::vector<double> w(vel.size(), 0.0);
-        for (const auto& sp : splats) w[sp.velocity] += adjoint_dot(sp.pixel, sp.value) / double(n);
-        for (size_t i = 0; i < vel.size(); ++i) scatter(vel[i], w[i], in);
-      });
-  }
+  const BoundaryTerms terms = run_boundary_terms(scene, params, opt, rays, [&](const PathInputs& in,
+      const std::vector<IndirectBoundary::Splat>& splats, const std::vector<ad::Var>& vel) {
+    std::vector<double> w(vel.size(), 0.0);
+    for (const auto& sp : splats) w[sp.velocity] += adjoint_dot(sp.pixel, sp.value);
+    for (size_t i = 0; i < vel.size(); ++i) scatter(vel[i], w[i], in);
+  });
   ad::Tape::current().clear();
   std::vector<double> total(params.slot_count(), 0.0);
   for (const auto& g : grads)
@@ -319,7 +310,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     stats->paths = uint64_t(W) * H * spp;
     stats->rays = rays;
     stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp, opt, primary.get(), indirect.get());
+    stats->summary = summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get());
   }
   return total;
 }
