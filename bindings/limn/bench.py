@@ -59,7 +59,7 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
             summary[m] = st["summary"]
     name = os.path.splitext(os.path.basename(scene_path))[0]
     os.makedirs(out, exist_ok=True)
-    command = "python3 -m limn bench " + " ".join(shlex.quote(a) for a in (argv or []))
+    command = "python3 -m limn " + " ".join(shlex.quote(a) for a in (argv or []))
     lines = [f"# Gradient error against run time: {name}", "",
              f"Regenerate: `{command}`", "",
              f"Parameter `{param}`, tangent `{tangent}`; reference: central differences, eps {eps}, {fd_spp} spp "

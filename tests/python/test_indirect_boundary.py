@@ -20,7 +20,7 @@ def quiet(fn, *args, **kw):
 
 def shadow_scene(light):
     return {"type": "scene", "integrator": {"type": "direct"},
-            "sensor": camera((0, -0.01, 5), (0, 0, 0), fov=45, width=16, height=16, spp=64),
+            "sensor": camera((0, -4, 3), (0.3, 0.3, 0.3), fov=45, width=16, height=16, spp=64),
             "floor": {"type": "rectangle", "to_world": {"scale": 4}, "bsdf": {"type": "diffuse", "reflectance": 0.6}},
             "box": {"type": "cube", "to_world": [{"scale": 0.3}, {"translate": [0.4, 0.2, 1.2]}],
                     "bsdf": {"type": "diffuse", "reflectance": 0.4}},
