@@ -1,4 +1,5 @@
-"""limn for Blender: render (and, later, optimise) the scene with the limn differentiable renderer.
+"""limn for Blender: render the scene with the limn differentiable renderer and optimise a mesh
+so that its renders match target images.
 
 Registers as a legacy add-on in Blender 3.x (bl_info) and as an extension in 4.2+
 (blender_manifest.toml). Scripts can call ``render(...)`` and ``export_scene(...)`` directly."""
@@ -15,11 +16,12 @@ bl_info = {
 
 import bpy
 
-from . import exporter, render_ops
+from . import exporter, optimize_ops, render_ops
 from .exporter import export_scene, write_scene
+from .optimize_ops import optimize
 from .render_ops import render, load_blender_scene
 
-__all__ = ["render", "export_scene", "write_scene", "load_blender_scene"]
+__all__ = ["render", "optimize", "export_scene", "write_scene", "load_blender_scene"]
 
 
 class LimnPreferences(bpy.types.AddonPreferences):
@@ -39,6 +41,12 @@ class LimnSettings(bpy.types.PropertyGroup):
     max_depth: bpy.props.IntProperty(name="Max depth", default=0, min=0,
                                      description="Longest path in segments; 0 uses Cycles' max bounces + 2")
     image_name: bpy.props.StringProperty(name="Image", default="limn render")
+    # Optimisation
+    optimize_object: bpy.props.PointerProperty(name="Object", type=bpy.types.Object, poll=lambda self, o: o.type == "MESH")
+    targets: bpy.props.CollectionProperty(type=optimize_ops.LimnTarget)
+    iterations: bpy.props.IntProperty(name="Iterations", default=50, min=1)
+    learning_rate: bpy.props.FloatProperty(name="Learning rate", default=0.01, min=1e-6, precision=4)
+    large_steps_lambda: bpy.props.FloatProperty(name="Large-Steps lambda", default=20.0, min=0.0)
 
 
 class LIMN_PT_render(bpy.types.Panel):
@@ -56,9 +64,22 @@ class LIMN_PT_render(bpy.types.Panel):
         col.prop(s, "image_name")
         col.operator(render_ops.LIMN_OT_render.bl_idname, icon="RENDER_STILL")
         col.operator(render_ops.LIMN_OT_export.bl_idname, icon="EXPORT")
+        box = self.layout.box()
+        box.label(text="Optimise geometry")
+        box.prop(s, "optimize_object")
+        for t in s.targets:
+            row = box.row()
+            row.prop(t, "camera", text="")
+            row.prop(t, "image", text="")
+        box.operator(optimize_ops.LIMN_OT_target_add.bl_idname, icon="ADD")
+        box.prop(s, "iterations")
+        box.prop(s, "learning_rate")
+        box.prop(s, "large_steps_lambda")
+        box.operator(optimize_ops.LIMN_OT_optimize.bl_idname, icon="MOD_SMOOTH")
 
 
-_classes = (LimnPreferences, LimnSettings, render_ops.LIMN_OT_render, render_ops.LIMN_OT_export, LIMN_PT_render)
+_classes = (LimnPreferences, optimize_ops.LimnTarget, LimnSettings, render_ops.LIMN_OT_render, render_ops.LIMN_OT_export,
+            optimize_ops.LIMN_OT_target_add, optimize_ops.LIMN_OT_optimize, LIMN_PT_render)
 
 
 def register():
