@@ -44,7 +44,7 @@ bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const Sur
   // Shading-normal leaks, as in the path tracer.
   if (glm::dot(wc, si.ng) * wi.z <= 0.0f || glm::dot(w_light, si.ng) * wo.z <= 0.0f || wo.z == 0.0f) return false;
   const Bsdf& bsdf = scene.bsdfs[scene.shapes[si.shape].bsdf];
-  const Spectrum f = bsdf.eval(wi, wo, si.uv) / std::abs(wo.z);  // f alone: the ray measure has the cosine
+  const Spectrum f = bsdf.eval(wi, wo, si.uv, glm::dot(wc, si.ng) > 0.0f) / std::abs(wo.z);  // f alone: the ray measure has the cosine
   if (is_black(f)) return false;
   rays++;
   if (scene.occluded(spawn_ray_to(si, eye))) return false;
@@ -183,7 +183,7 @@ void IndirectBoundary::evaluate_direction(const BoundaryEdge& e, const Vec3& xb,
       if (j > bounces) break;
       // Continue the importance path by BSDF sampling (adjoint of reflection; reciprocal BSDFs).
       const Bsdf& bsdf = m_scene.bsdfs[m_scene.shapes[cur.shape].bsdf];
-      const auto bs = bsdf.sample(cur.frame.to_local(w_light), rng.next_float(), rng.next_2d(), cur.uv);
+      const auto bs = bsdf.sample(cur.frame.to_local(w_light), rng.next_float(), rng.next_2d(), cur.uv, glm::dot(w_light, cur.ng) > 0.0f);
       if (!bs) break;
       const Vec3 wo = cur.frame.to_world(bs->wo);
       if (glm::dot(wo, cur.ng) * bs->wo.z <= 0.0f) break;

@@ -183,14 +183,16 @@ struct Replay {
     const Bsdf& b = scene.bsdfs[bsdf_index];
     const diff::Frame3<Var> frame(x.ns);
     VV wi = frame.to_local(wi_world), wo = frame.to_local(wo_world);
-    if (b.twosided && wi.z.v < 0.0) {
+    bool front = dot(wi_world, x.ng).v > 0.0;  // geometric side, as Bsdf::eval
+    if (b.twosided && !front) {
       wi.z = -wi.z;
       wo.z = -wo.z;
+      front = true;
     }
     return std::visit([&](const auto& m) -> VV {
       using T = std::decay_t<decltype(m)>;
       if constexpr (std::is_same_v<T, Diffuse>) {
-        return diff::eval_diffuse(reflectance(bsdf_index, m.reflectance, x.u, x.v), wi, wo);
+        return diff::eval_diffuse(reflectance(bsdf_index, m.reflectance, x.u, x.v), wi, wo, front);
       } else if constexpr (std::is_same_v<T, RoughConductor>) {
         return diff::eval_rough_conductor(m.distribution.type, alpha(bsdf_index, m.distribution.alpha), m.eta, m.k,
                                           m.specular_reflectance, wi, wo);
@@ -313,6 +315,7 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
 
     const Bsdf& bsdf = scene.bsdfs[shape.bsdf];
     const Vec3 wi_local = si.frame.to_local(-ray.d);
+    const bool front = glm::dot(ray.d, si.ng) < 0.0f;
 
     // Next-event estimation (same random numbers and tests as estimate_direct()).
     if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty()) {
@@ -326,7 +329,7 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
       Vec3 wo_local(0.0f);
       if (ok) {
         wo_local = si.frame.to_local(es.wi);
-        ok = glm::dot(es.wi, si.ng) * wo_local.z > 0.0f && !is_black(bsdf.eval(wi_local, wo_local, si.uv));
+        ok = glm::dot(es.wi, si.ng) * wo_local.z > 0.0f && !is_black(bsdf.eval(wi_local, wo_local, si.uv, front));
       }
       if (ok) {
         counters.rays++;
@@ -334,7 +337,7 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
       }
       if (ok) {
         const float pdf_light = es.pdf * scene.emitter_selection_pdf();
-        const float w = es.delta || !cfg.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv));
+        const float w = es.delta || !cfg.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv, front));
         VV contrib;
         if (const auto* area = std::get_if<AreaEmitter>(&e.model)) {
           const PositionSample& ps = es.position;
@@ -366,7 +369,7 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
 
     // BSDF sampling (same random numbers and tests as path_radiance()).
     const float u_lobe = rng.next_float();
-    const auto bs = bsdf.sample(wi_local, u_lobe, rng.next_2d(), si.uv);
+    const auto bs = bsdf.sample(wi_local, u_lobe, rng.next_2d(), si.uv, front);
     if (!bs) break;
     const Vec3 wo = si.frame.to_world(bs->wo);
     if (glm::dot(wo, si.ng) * bs->wo.z <= 0.0f) break;

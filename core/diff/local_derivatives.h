@@ -121,9 +121,10 @@ T microfacet_G1(MicrofacetType type, const T& alpha, const V3<T>& w, const V3<T>
 }
 
 // ---- BSDF evaluation (local frame; returns f * |cos wo|, RGB) -------------------------------------
+// `front`: wi is on the geometric front side (see core/render/bsdfs/bsdf.h).
 template <typename T>
-V3<T> eval_diffuse(const V3<T>& reflectance, const V3<T>& wi, const V3<T>& wo) {
-  if (ad::value(wi.z) <= 0.0 || ad::value(wo.z) <= 0.0) return V3<T>();
+V3<T> eval_diffuse(const V3<T>& reflectance, const V3<T>& wi, const V3<T>& wo, bool front) {
+  if (!front || ad::value(wo.z) <= 0.0) return V3<T>();
   return reflectance * (wo.z * T(kInvPi));
 }
 

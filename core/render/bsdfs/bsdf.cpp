@@ -9,15 +9,15 @@ namespace limn {
 namespace {
 
 // ---- diffuse ----------------------------------------------------------------------------------
-Spectrum eval_model(const Diffuse& b, const Vec3& wi, const Vec3& wo, const Vec2& uv) {
+Spectrum eval_model(const Diffuse& b, const Vec3& wi, const Vec3& wo, const Vec2& uv, bool front) {
   if (wi.z <= 0.0f || wo.z <= 0.0f) return Spectrum(0.0f);
   return b.reflectance.eval(uv) * (kInvPi * wo.z);
 }
-float pdf_model(const Diffuse&, const Vec3& wi, const Vec3& wo, const Vec2&) {
-  return wi.z > 0.0f ? warp::square_to_cosine_hemisphere_pdf(wo) : 0.0f;
+float pdf_model(const Diffuse&, const Vec3& wi, const Vec3& wo, const Vec2&, bool front) {
+  return front ? warp::square_to_cosine_hemisphere_pdf(wo) : 0.0f;
 }
-std::optional<BsdfSample> sample_model(const Diffuse& b, const Vec3& wi, float, const Vec2& u, const Vec2& uv) {
-  if (wi.z <= 0.0f) return std::nullopt;
+std::optional<BsdfSample> sample_model(const Diffuse& b, const Vec3& wi, float, const Vec2& u, const Vec2& uv, bool front) {
+  if (!front) return std::nullopt;
   BsdfSample s;
   s.wo = warp::square_to_cosine_hemisphere(u);
   s.pdf = warp::square_to_cosine_hemisphere_pdf(s.wo);
@@ -160,24 +160,38 @@ std::optional<BsdfSample> sample_model(const RoughDielectric& b, const Vec3& wi,
   return s;
 }
 
-// Twosided: mirror both directions into the upper hemisphere (z -> -z) when wi is below.
+// Twosided: mirror both directions (z -> -z) when wi is seen from the back of the surface.
 Vec3 flip_z(const Vec3& w) { return Vec3(w.x, w.y, -w.z); }
 
 }  // namespace
 
-Spectrum Bsdf::eval(const Vec3& wi, const Vec3& wo, const Vec2& uv) const {
-  const bool flip = twosided && wi.z < 0.0f;
-  return std::visit([&](const auto& m) { return eval_model(m, flip ? flip_z(wi) : wi, flip ? flip_z(wo) : wo, uv); }, model);
+// Only the diffuse model decides its side by `front`; the microfacet and dielectric formulas need
+// wi in the shading hemisphere they are written for (their values vanish there as wi.z -> 0).
+Spectrum Bsdf::eval(const Vec3& wi, const Vec3& wo, const Vec2& uv, bool front) const {
+  const bool flip = twosided && !front;
+  const Vec3 a = flip ? flip_z(wi) : wi, b = flip ? flip_z(wo) : wo;
+  return std::visit([&](const auto& m) {
+    if constexpr (std::is_same_v<std::decay_t<decltype(m)>, Diffuse>) return eval_model(m, a, b, uv, front || flip);
+    else return eval_model(m, a, b, uv);
+  }, model);
 }
 
-float Bsdf::pdf(const Vec3& wi, const Vec3& wo, const Vec2& uv) const {
-  const bool flip = twosided && wi.z < 0.0f;
-  return std::visit([&](const auto& m) { return pdf_model(m, flip ? flip_z(wi) : wi, flip ? flip_z(wo) : wo, uv); }, model);
+float Bsdf::pdf(const Vec3& wi, const Vec3& wo, const Vec2& uv, bool front) const {
+  const bool flip = twosided && !front;
+  const Vec3 a = flip ? flip_z(wi) : wi, b = flip ? flip_z(wo) : wo;
+  return std::visit([&](const auto& m) {
+    if constexpr (std::is_same_v<std::decay_t<decltype(m)>, Diffuse>) return pdf_model(m, a, b, uv, front || flip);
+    else return pdf_model(m, a, b, uv);
+  }, model);
 }
 
-std::optional<BsdfSample> Bsdf::sample(const Vec3& wi, float u_lobe, const Vec2& u, const Vec2& uv) const {
-  const bool flip = twosided && wi.z < 0.0f;
-  auto s = std::visit([&](const auto& m) { return sample_model(m, flip ? flip_z(wi) : wi, u_lobe, u, uv); }, model);
+std::optional<BsdfSample> Bsdf::sample(const Vec3& wi, float u_lobe, const Vec2& u, const Vec2& uv, bool front) const {
+  const bool flip = twosided && !front;
+  const Vec3 a = flip ? flip_z(wi) : wi;
+  auto s = std::visit([&](const auto& m) {
+    if constexpr (std::is_same_v<std::decay_t<decltype(m)>, Diffuse>) return sample_model(m, a, u_lobe, u, uv, front || flip);
+    else return sample_model(m, a, u_lobe, u, uv);
+  }, model);
   if (s && flip) s->wo = flip_z(s->wo);
   if (s && !(std::isfinite(s->pdf) && is_finite(s->weight))) return std::nullopt;
   return s;

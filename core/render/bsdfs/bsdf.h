@@ -1,6 +1,10 @@
 // The closed set of BSDFs. Directions are in the local shading frame (z = shading normal); wi
 // points towards the previous path vertex (the viewer), wo towards the next one (the light).
 // eval() returns f(wi, wo) * |cos(wo)| (Mitsuba's convention); pdfs are per solid angle of wo.
+// `front` says whether wi is on the front side of the *geometric* surface. It, not the sign of
+// wi.z, decides which side a one-sided or twosided diffuse surface is seen from: with interpolated
+// normals wi.z can turn negative near silhouettes, and a cut-off there would be a discontinuity
+// inside the triangles that no boundary term samples.
 #pragma once
 #include <optional>
 #include <string>
@@ -53,10 +57,10 @@ struct Bsdf {
   BsdfModel model;
   bool twosided = false;  // reflect from both sides (for non-transmissive models only)
 
-  Spectrum eval(const Vec3& wi, const Vec3& wo, const Vec2& uv) const;
-  float pdf(const Vec3& wi, const Vec3& wo, const Vec2& uv) const;
+  Spectrum eval(const Vec3& wi, const Vec3& wo, const Vec2& uv, bool front) const;
+  float pdf(const Vec3& wi, const Vec3& wo, const Vec2& uv, bool front) const;
   // u_lobe picks a lobe, u a direction within it.
-  std::optional<BsdfSample> sample(const Vec3& wi, float u_lobe, const Vec2& u, const Vec2& uv) const;
+  std::optional<BsdfSample> sample(const Vec3& wi, float u_lobe, const Vec2& u, const Vec2& uv, bool front) const;
   // True when every lobe is a Dirac delta (no point in emitter sampling).
   bool is_delta() const {
     return std::holds_alternative<Conductor>(model) || std::holds_alternative<Dielectric>(model);

@@ -14,7 +14,7 @@ Spectrum area_radiance(const Scene& scene, const SurfaceInteraction& si) {
 
 // Next-event estimation at si: one emitter chosen uniformly, MIS-weighted against BSDF sampling.
 Spectrum estimate_direct(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, const Vec3& wi_local,
-                         Pcg32& rng, PathCounters& counters) {
+                         bool front, Pcg32& rng, PathCounters& counters) {
   const size_t n = scene.emitters.size();
   const size_t k = std::min(size_t(rng.next_float() * n), n - 1);
   const Emitter& e = scene.emitters[k];
@@ -25,13 +25,13 @@ Spectrum estimate_direct(const Scene& scene, const SurfaceInteraction& si, const
   const Vec3 wo_local = si.frame.to_local(es.wi);
   // Shading-normal light leaks: the geometric and shading hemispheres must agree.
   if (glm::dot(es.wi, si.ng) * wo_local.z <= 0.0f) return Spectrum(0.0f);
-  const Spectrum f = bsdf.eval(wi_local, wo_local, si.uv);
+  const Spectrum f = bsdf.eval(wi_local, wo_local, si.uv, front);
   if (is_black(f)) return Spectrum(0.0f);
   const Ray shadow = es.to_infinity ? spawn_ray(si, es.wi) : spawn_ray_to(si, es.p);
   counters.rays++;
   if (scene.occluded(shadow)) return Spectrum(0.0f);
   const float pdf_light = es.pdf * scene.emitter_selection_pdf();
-  const float w = es.delta || !scene.integrator.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv));
+  const float w = es.delta || !scene.integrator.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv, front));
   return f * es.radiance * (w / pdf_light);
 }
 
@@ -81,13 +81,14 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     const Shape& shape = scene.shapes[si.shape];
     const Bsdf& bsdf = scene.bsdfs[shape.bsdf];
     const Vec3 wi_local = si.frame.to_local(-ray.d);
+    const bool front = glm::dot(ray.d, si.ng) < 0.0f;  // geometric side the ray arrives from
 
     if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty())
-      L += beta * estimate_direct(scene, si, bsdf, wi_local, rng, counters);
+      L += beta * estimate_direct(scene, si, bsdf, wi_local, front, rng, counters);
     if (!cfg.bsdf_sampling) break;
 
     const float u_lobe = rng.next_float();
-    const auto bs = bsdf.sample(wi_local, u_lobe, rng.next_2d(), si.uv);
+    const auto bs = bsdf.sample(wi_local, u_lobe, rng.next_2d(), si.uv, front);
     if (!bs) break;
     const Vec3 wo = si.frame.to_world(bs->wo);
     if (glm::dot(wo, si.ng) * bs->wo.z <= 0.0f) break;  // shading-normal leak

@@ -122,10 +122,10 @@ TEST_CASE("bsdfs: templated evaluation equals Bsdf::eval and differentiates in a
       const Bsdf cond{"c", RoughConductor{eta, k, tint, m}, false};
       const Bsdf diel{"d", RoughDielectric{1.5f, tint, tint, m}, false};
       const auto ev = diff::eval_rough_conductor<double>(m.type, m.alpha, eta, k, tint, ad::V3<double>(wi), ad::V3<double>(wo_r));
-      CHECK(ev.x == doctest::Approx(cond.eval(wi, wo_r, Vec2(0)).x).epsilon(1e-4));
+      CHECK(ev.x == doctest::Approx(cond.eval(wi, wo_r, Vec2(0), wi.z > 0).x).epsilon(1e-4));
       for (const Vec3& wo : {wo_r, wo_t}) {
         const auto dv = diff::eval_rough_dielectric<double>(m.type, m.alpha, 1.5, tint, tint, ad::V3<double>(wi), ad::V3<double>(wo));
-        CHECK(dv.x == doctest::Approx(diel.eval(wi, wo, Vec2(0)).x).epsilon(1e-4));
+        CHECK(dv.x == doctest::Approx(diel.eval(wi, wo, Vec2(0), wi.z > 0).x).epsilon(1e-4));
       }
       // Gradients in alpha and both directions (x: alpha, wi (3), wo (3), unnormalised).
       std::vector<double> x = {m.alpha, wi.x, wi.y, wi.z, wo_r.x, wo_r.y, wo_r.z};
@@ -140,7 +140,7 @@ TEST_CASE("bsdfs: templated evaluation equals Bsdf::eval and differentiates in a
     }
     check_gradient([&](const auto& x) {
       using T = std::decay_t<decltype(x[0])>;
-      return diff::eval_diffuse(ad::V3<T>(x[0], x[0], x[0]), normalize(v3(x, 1)), normalize(v3(x, 4))).x;
+      return diff::eval_diffuse(ad::V3<T>(x[0], x[0], x[0]), normalize(v3(x, 1)), normalize(v3(x, 4)), true).x;
     }, {0.7, wi.x, wi.y, wi.z, wo_r.x, wo_r.y, wo_r.z});
   }
 }

@@ -60,12 +60,12 @@ bool chi_square_ok(const Bsdf& b, const Vec3& wi, std::string& detail) {
         for (int j = 0; j < kStrata; ++j) {
           const float z = -1.0f + (t + (i + rng.next_float()) / kStrata) * (2.0f / kTheta);
           const float phi = (p + (j + rng.next_float()) / kStrata) * (2.0f * kPi / kPhi);
-          s += b.pdf(wi, dir_from(z, phi), Vec2(0));
+          s += b.pdf(wi, dir_from(z, phi), Vec2(0), wi.z > 0);
         }
       expected[t * kPhi + p] = s / (kStrata * kStrata) * bin_area * kN;
     }
   for (int i = 0; i < kN; ++i) {
-    auto s = b.sample(wi, rng.next_float(), rng.next_2d(), Vec2(0));
+    auto s = b.sample(wi, rng.next_float(), rng.next_2d(), Vec2(0), wi.z > 0);
     if (!s) continue;
     const int t = std::clamp(int((s->wo.z + 1.0f) * 0.5f * kTheta), 0, kTheta - 1);
     float phi = std::atan2(s->wo.y, s->wo.x);
@@ -110,11 +110,11 @@ TEST_CASE("bsdfs: sampling, pdf and eval agree; albedo <= 1") {
       double albedo = 0, albedo2 = 0;
       int success = 0, bad = 0;
       for (int i = 0; i < kN; ++i) {
-        auto s = c.bsdf.sample(wi, rng.next_float(), rng.next_2d(), Vec2(0));
+        auto s = c.bsdf.sample(wi, rng.next_float(), rng.next_2d(), Vec2(0), wi.z > 0);
         if (!s) continue;
         ++success;
-        const float pdf = c.bsdf.pdf(wi, s->wo, Vec2(0));
-        const Spectrum f = c.bsdf.eval(wi, s->wo, Vec2(0));
+        const float pdf = c.bsdf.pdf(wi, s->wo, Vec2(0), wi.z > 0);
+        const Spectrum f = c.bsdf.eval(wi, s->wo, Vec2(0), wi.z > 0);
         if (rel_err(s->pdf, pdf) > 2e-3f || rel_err(s->weight.x, f.x / pdf) > 2e-3f) ++bad;
         albedo += s->weight.x;
         albedo2 += double(s->weight.x) * s->weight.x;
@@ -126,10 +126,10 @@ TEST_CASE("bsdfs: sampling, pdf and eval agree; albedo <= 1") {
       double pdf_int = 0, pdf2 = 0, eval_int = 0, eval2 = 0;
       for (int i = 0; i < kN; ++i) {
         const Vec3 wo = warp::square_to_uniform_sphere(rng.next_2d());
-        const double pv = c.bsdf.pdf(wi, wo, Vec2(0)) * 4 * M_PI;
+        const double pv = c.bsdf.pdf(wi, wo, Vec2(0), wi.z > 0) * 4 * M_PI;
         pdf_int += pv;
         pdf2 += pv * pv;
-        const double e = c.bsdf.eval(wi, wo, Vec2(0)).x * 4 * M_PI;
+        const double e = c.bsdf.eval(wi, wo, Vec2(0), wi.z > 0).x * 4 * M_PI;
         eval_int += e;
         eval2 += e * e;
       }
@@ -168,7 +168,7 @@ TEST_CASE("bsdfs: reflection models are reciprocal") {
     for (int i = 0; i < 200; ++i) {
       const Vec3 a = warp::square_to_uniform_hemisphere(rng.next_2d()), b = warp::square_to_uniform_hemisphere(rng.next_2d());
       if (a.z < 1e-3f || b.z < 1e-3f) continue;
-      const float fab = c.bsdf.eval(a, b, Vec2(0)).x / b.z, fba = c.bsdf.eval(b, a, Vec2(0)).x / a.z;
+      const float fab = c.bsdf.eval(a, b, Vec2(0), a.z > 0).x / b.z, fba = c.bsdf.eval(b, a, Vec2(0), b.z > 0).x / a.z;
       CAPTURE(c.name);
       CHECK(fab == doctest::Approx(fba).epsilon(1e-3));
     }
@@ -186,7 +186,7 @@ TEST_CASE("bsdfs: rough dielectric approaches the smooth interface as alpha -> 0
     double albedo = 0;
     const int n = 200000;
     for (int i = 0; i < n; ++i)
-      if (auto s = b.sample(wi, rng.next_float(), rng.next_2d(), Vec2(0))) albedo += s->weight.x;
+      if (auto s = b.sample(wi, rng.next_float(), rng.next_2d(), Vec2(0), wi.z > 0)) albedo += s->weight.x;
     CHECK(albedo / n == doctest::Approx(expected).epsilon(0.01));
   }
 }
@@ -199,4 +199,19 @@ TEST_CASE("fresnel: normal incidence and total internal reflection") {
   const float n = 0.2f, k = 3.9f;
   CHECK(fresnel_conductor(1.0f, n, k) == doctest::Approx(((n - 1) * (n - 1) + k * k) / ((n + 1) * (n + 1) + k * k)).epsilon(1e-4));
   CHECK(fresnel_conductor(0.3f, 0.0f, 1.0f) == doctest::Approx(1.0f).epsilon(1e-5));
+}
+
+TEST_CASE("bsdfs: the side of a diffuse surface is the geometric one") {
+  // With interpolated normals, wi can lie below the shading hemisphere while the geometric surface
+  // faces the viewer (next to silhouettes): the surface must still reflect there, continuously.
+  const Bsdf one{"d", Diffuse{Texture{Spectrum(0.6f), nullptr}}, false};
+  const Bsdf two{"d2", Diffuse{Texture{Spectrum(0.6f), nullptr}}, true};
+  const Vec3 wi_below = glm::normalize(Vec3(0.9f, 0.0f, -0.05f)), wo = glm::normalize(Vec3(-0.3f, 0.2f, 0.9f));
+  CHECK(one.eval(wi_below, wo, Vec2(0), true).x == doctest::Approx(0.6f * kInvPi * wo.z));
+  CHECK(one.eval(wi_below, wo, Vec2(0), false).x == 0.0f);
+  CHECK(one.pdf(wi_below, wo, Vec2(0), true) > 0.0f);
+  CHECK(one.sample(wi_below, 0.5f, Vec2(0.3f, 0.6f), Vec2(0), true).has_value());
+  // Twosided flips by the geometric side too: seen from the back, light from below counts.
+  CHECK(two.eval(Vec3(0, 0, -1), Vec3(0.0f, 0.6f, -0.8f), Vec2(0), false).x == doctest::Approx(0.6f * kInvPi * 0.8f));
+  CHECK(two.eval(Vec3(0, 0, -1), Vec3(0.0f, 0.6f, 0.8f), Vec2(0), false).x == 0.0f);
 }
