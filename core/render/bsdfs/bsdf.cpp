@@ -10,7 +10,7 @@ namespace {
 
 // ---- diffuse ----------------------------------------------------------------------------------
 Spectrum eval_model(const Diffuse& b, const Vec3& wi, const Vec3& wo, const Vec2& uv, bool front) {
-  if (wi.z <= 0.0f || wo.z <= 0.0f) return Spectrum(0.0f);
+  if (!front || wo.z <= 0.0f) return Spectrum(0.0f);
   return b.reflectance.eval(uv) * (kInvPi * wo.z);
 }
 float pdf_model(const Diffuse&, const Vec3& wi, const Vec3& wo, const Vec2&, bool front) {
