@@ -41,7 +41,10 @@ class Tape {
     }
   }
   static Tape& current() {
-    thread_local Tape tape;
+    // initial-exec: every tape operation looks this up; the default model for shared libraries
+    // goes through __tls_get_addr, measured at ~15% of render_backward. The tape is 24 bytes,
+    // well within the static TLS surplus glibc keeps for dlopen'ed libraries.
+    static thread_local Tape tape __attribute__((tls_model("initial-exec")));
     return tape;
   }
 

@@ -154,6 +154,9 @@ def main() -> int:
         "Sum of Cycles' converged image over limn's, per channel, over the pixels that do not see the lamp "
         "(1 is perfect agreement of light units, materials and bounce counts): " + ", ".join(f"{r:.3f}" for r in ratio) + ".",
         "The exporter's light conversions are in docs/blender.md.", "",
+        "## Derivatives", "",
+        "Cost of render_backward against render and memory: docs/reports/derivative_cost.md "
+        "(`.venv/bin/python tests/bench/derivative_cost.py`).", "",
     ]
     if warnings:
         lines += ["Exporter warnings:", ""] + [f"- {w}" for w in warnings] + [""]
