@@ -9,14 +9,13 @@ and at the end, and Esc cancels, keeping the last state. In background mode the 
 same loop blocking and prints progress."""
 from __future__ import annotations
 
-import threading
 import time
 
 import bpy
 import numpy as np
 
 from . import exporter
-from .render_ops import _limn
+from .render_ops import _limn, end_worker, start_worker
 
 
 def _target_pixels(target, width: int, height: int, limn) -> np.ndarray:
@@ -163,14 +162,8 @@ class LIMN_OT_optimize(bpy.types.Operator):
             state["done"] = True
 
         self._iterations = s.iterations
-        self._thread = threading.Thread(target=work, daemon=True)
-        self._thread.start()
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.2, window=context.window)
-        wm.progress_begin(0, 100)
-        wm.modal_handler_add(self)
         self._last_write = -1
-        return {"RUNNING_MODAL"}
+        return start_worker(self, context, work, 0.2)
 
     def modal(self, context, event):
         state = self._state
@@ -186,10 +179,7 @@ class LIMN_OT_optimize(bpy.types.Operator):
             self._last_write = state["it"]
         if not state["done"]:
             return {"RUNNING_MODAL"}
-        context.window_manager.event_timer_remove(self._timer)
-        context.window_manager.progress_end()
-        if context.area:
-            context.area.header_text_set(None)
+        end_worker(self, context)
         if state["x"] is not None:
             self._problem.write_back(state["x"])
         if state["error"] is not None:

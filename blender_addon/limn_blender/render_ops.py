@@ -24,6 +24,27 @@ def _limn(context=None):
     return import_limn(getattr(prefs, "module_path", "") or None)
 
 
+def start_worker(operator, context, work, interval: float):
+    """Runs work() on a daemon thread (it must not touch bpy) and makes `operator` modal with a
+    timer and a progress bar; operator.modal() polls operator._thread."""
+    operator._thread = threading.Thread(target=work, daemon=True)
+    operator._thread.start()
+    wm = context.window_manager
+    operator._timer = wm.event_timer_add(interval, window=context.window)
+    wm.progress_begin(0, 100)
+    wm.modal_handler_add(operator)
+    return {"RUNNING_MODAL"}
+
+
+def end_worker(operator, context) -> None:
+    """Undoes start_worker's timer, progress bar and header text."""
+    wm = context.window_manager
+    wm.event_timer_remove(operator._timer)
+    wm.progress_end()
+    if context.area:
+        context.area.header_text_set(None)
+
+
 def image_to_blender(pixels: np.ndarray, name: str):
     """Stores a (H, W, 3) linear float image in a float Blender image datablock (created or resized)."""
     h, w = pixels.shape[:2]
@@ -107,13 +128,7 @@ class LIMN_OT_render(bpy.types.Operator):
             except Exception as e:  # reported on the main thread
                 state["error"] = e
 
-        self._thread = threading.Thread(target=work, daemon=True)
-        self._thread.start()
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.progress_begin(0, 100)
-        wm.modal_handler_add(self)
-        return {"RUNNING_MODAL"}
+        return start_worker(self, context, work, 0.1)
 
     def modal(self, context, event):
         if event.type == "ESC":
@@ -126,10 +141,7 @@ class LIMN_OT_render(bpy.types.Operator):
             context.area.header_text_set(f"limn: {100 * self._state['fraction']:.0f}% (Esc to cancel)")
         if self._thread.is_alive():
             return {"RUNNING_MODAL"}
-        wm.event_timer_remove(self._timer)
-        wm.progress_end()
-        if context.area:
-            context.area.header_text_set(None)
+        end_worker(self, context)
         if self._state["error"] is not None:
             self.report({"WARNING" if self._state["cancel"] else "ERROR"}, f"limn: {self._state['error']}")
             return {"CANCELLED"}

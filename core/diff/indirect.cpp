@@ -1,7 +1,6 @@
 #include "core/diff/indirect.h"
 
 #include <map>
-#include <unordered_map>
 #include "core/diff/film_projection.h"
 #include "core/math/warp.h"
 #include "core/render/integrators/path.h"
@@ -14,11 +13,6 @@ using VV = ad::V3<Var>;
 
 // Extra observing vertices traced for unbounded paths (importance beyond the first bounce).
 constexpr int kImportanceBounces = 4;
-
-Vec3d face_normal(const Mesh& m, int f) {
-  const Vec3 p0 = m.vertex(m.indices[3 * f]), p1 = m.vertex(m.indices[3 * f + 1]), p2 = m.vertex(m.indices[3 * f + 2]);
-  return glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
-}
 
 uint32_t opposite_vertex(const Mesh& m, int f, uint32_t a, uint32_t b) {
   for (int k = 0; k < 3; ++k) {
@@ -60,28 +54,21 @@ IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params)
     const Shape& shape = scene.shapes[si];
     if (!shape.is_mesh()) continue;  // spheres: the interior (curvature) term is not implemented
     const Mesh& m = shape.mesh();
-    std::unordered_map<uint64_t, std::vector<int>> edges;
-    for (uint32_t f = 0; f < m.triangle_count(); ++f)
-      for (int k = 0; k < 3; ++k) {
-        uint32_t a = m.indices[3 * f + k], b = m.indices[3 * f + (k + 1) % 3];
-        if (a > b) std::swap(a, b);
-        edges[(uint64_t(a) << 32) | b].push_back(int(f));
-      }
-    for (const auto& [key, faces] : edges) {
-      const uint32_t a = uint32_t(key >> 32), b = uint32_t(key & 0xffffffffu);
-      bool keep = faces.size() != 2;
+    for (const MeshEdge& e : m.edges) {
+      const uint32_t a = e.a, b = e.b;
+      bool keep = e.face_count != 2;
       if (!keep) {
         // Convex and not flat: the third vertex of one face lies strictly below the other's plane
         // (1e-6 of the edge length: below that the dihedral angle is numerically flat).
-        const Vec3d n0 = face_normal(m, faces[0]);
-        const Vec3 c = m.vertex(opposite_vertex(m, faces[1], a, b));
+        const Vec3d n0 = m.face_normal(e.face0);
+        const Vec3 c = m.vertex(opposite_vertex(m, e.face1, a, b));
         const double h = glm::dot(n0, Vec3d(c - m.vertex(a)));
         keep = h < -1e-6 * glm::length(Vec3d(m.vertex(b) - m.vertex(a)));
       }
       if (!keep) continue;
       const float len = glm::length(m.vertex(b) - m.vertex(a));
       if (!(len > 0.0f)) continue;
-      m_edges.push_back({si, a, b, faces[0], faces.size() == 2 ? faces[1] : -1});
+      m_edges.push_back({si, a, b, e.face0, e.face_count == 2 ? e.face1 : -1});
       lengths.push_back(len);
       m_total_length += len;
     }
@@ -139,10 +126,10 @@ void IndirectBoundary::evaluate_direction(const BoundaryEdge& e, const Vec3& xb,
   const Vec3 n_b = txw / sin_phi;
 
   // Only silhouettes for rays along w matter: one face towards w, the other away (or an open edge).
-  const Vec3d n0 = face_normal(m, e.face0);
+  const Vec3d n0 = m.face_normal(e.face0);
   Vec3 n_out;
   if (e.face1 >= 0) {
-    const Vec3d n1 = face_normal(m, e.face1);
+    const Vec3d n1 = m.face_normal(e.face1);
     if ((glm::dot(n0, Vec3d(w)) > 0.0) == (glm::dot(n1, Vec3d(w)) > 0.0)) return;
     n_out = Vec3(glm::normalize(n0 + n1));
   } else {

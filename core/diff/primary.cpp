@@ -1,6 +1,5 @@
 #include "core/diff/primary.h"
 
-#include <unordered_map>
 #include "core/diff/film_projection.h"
 #include "core/diff/local_derivatives.h"
 #include "core/render/integrators/path.h"
@@ -51,36 +50,23 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) :
     const Shape& shape = scene.shapes[si];
     if (shape.is_mesh()) {
       const Mesh& m = shape.mesh();
-      // Undirected edges with their triangles (welded topology).
-      std::unordered_map<uint64_t, std::vector<uint32_t>> edges;
-      for (uint32_t f = 0; f < m.triangle_count(); ++f)
-        for (int k = 0; k < 3; ++k) {
-          uint32_t a = m.indices[3 * f + k], b = m.indices[3 * f + (k + 1) % 3];
-          if (a > b) std::swap(a, b);
-          edges[(uint64_t(a) << 32) | b].push_back(f);
-        }
-      auto faces_eye = [&](uint32_t f) {
-        const Vec3 p0 = m.vertex(m.indices[3 * f]), p1 = m.vertex(m.indices[3 * f + 1]), p2 = m.vertex(m.indices[3 * f + 2]);
-        const Vec3d n = glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
+      auto faces_eye = [&](int f) {
+        const Vec3 p0 = m.vertex(m.indices[3 * f]);
         // Front-facing with a margin: a face within 1e-6 (cosine) of edge-on projects to no area
         // whichever way rounding tips it, and must not make a second outline next to the real one.
-        return glm::dot(n, glm::normalize(Vec3d(eye.x, eye.y, eye.z) - Vec3d(p0))) > 1e-6;
+        return glm::dot(m.face_normal(f), glm::normalize(Vec3d(eye.x, eye.y, eye.z) - Vec3d(p0))) > 1e-6;
       };
-      auto face_normal = [&](uint32_t f) {
-        const Vec3 p0 = m.vertex(m.indices[3 * f]), p1 = m.vertex(m.indices[3 * f + 1]), p2 = m.vertex(m.indices[3 * f + 2]);
-        return glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
-      };
-      for (const auto& [key, faces] : edges) {
-        bool candidate = faces.size() != 2;  // boundary or non-manifold edges are always candidates
-        if (!candidate) candidate = faces_eye(faces[0]) != faces_eye(faces[1]);  // silhouette
+      for (const MeshEdge& e : m.edges) {
+        bool candidate = e.face_count != 2;  // boundary or non-manifold edges are always candidates
+        if (!candidate) candidate = faces_eye(e.face0) != faces_eye(e.face1);  // silhouette
         // Flat shading: the radiance also jumps across a crease between two faces that both face
         // the camera (1e-6: cosine below which the faces count as coplanar, where the jump is zero).
         // Creases with a back-facing face are hidden or are silhouettes already; including them
         // would count an outline twice where a face is seen exactly edge-on.
-        if (!candidate && m.face_normals && faces_eye(faces[0]) && faces_eye(faces[1]))
-          candidate = glm::dot(face_normal(faces[0]), face_normal(faces[1])) < 1.0 - 1e-6;
+        if (!candidate && m.face_normals && faces_eye(e.face0) && faces_eye(e.face1))
+          candidate = glm::dot(m.face_normal(e.face0), m.face_normal(e.face1)) < 1.0 - 1e-6;
         if (!candidate) continue;
-        const int a = int(key >> 32), b = int(key & 0xffffffffu);
+        const int a = int(e.a), b = int(e.b);
         Vec2d sa, sb;
         if (!film_of(d3(m.vertex(a)), sa) || !film_of(d3(m.vertex(b)), sb)) {
           ++m_skipped;  // limitation: edges crossing the near plane are skipped (and counted), not clipped

@@ -113,6 +113,16 @@ double directional(const ad::Var& v, const PathInputs& in, const std::vector<dou
   return d;
 }
 
+void fill_stats(DiffStats* stats, std::chrono::steady_clock::time_point start, uint64_t paths, uint64_t rays, uint64_t invalid,
+                std::vector<std::string> summary) {
+  if (!stats) return;
+  stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  stats->paths = paths;
+  stats->rays = rays;
+  stats->invalid_paths = invalid;
+  stats->summary = std::move(summary);
+}
+
 bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
   for (const auto& [node, slot] : in.nodes)
     if (!std::isfinite(adj[node])) return false;
@@ -228,13 +238,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
   for (const auto& im : images)
     for (size_t i = 0; i < im.size(); ++i) img.rgb[i] += float(im[i]);
   ad::Tape::current().clear();
-  if (stats) {
-    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    stats->paths = uint64_t(W) * H * spp;
-    stats->rays = rays;
-    stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get());
-  }
+  fill_stats(stats, start, uint64_t(W) * H * spp, rays, invalid, summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get()));
   return img;
 }
 
@@ -305,13 +309,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
   std::vector<double> total(params.slot_count(), 0.0);
   for (const auto& g : grads)
     for (size_t i = 0; i < total.size(); ++i) total[i] += g[i];
-  if (stats) {
-    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    stats->paths = uint64_t(W) * H * spp;
-    stats->rays = rays;
-    stats->invalid_paths = invalid;
-    stats->summary = summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get());
-  }
+  fill_stats(stats, start, uint64_t(W) * H * spp, rays, invalid, summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get()));
   return total;
 }
 

@@ -16,6 +16,23 @@ void Mesh::update_derived() {
     std::vector<uint32_t> fill(vertex_face_offsets.begin(), vertex_face_offsets.end() - 1);
     for (size_t f = 0; f < nt; ++f)
       for (int k = 0; k < 3; ++k) vertex_faces[fill[indices[3 * f + k]]++] = uint32_t(f);
+    // Undirected edges: two triangles around a vertex share an edge when they share another vertex.
+    std::unordered_map<uint64_t, size_t> slot;
+    edges.clear();
+    for (size_t f = 0; f < nt; ++f)
+      for (int k = 0; k < 3; ++k) {
+        uint32_t a = indices[3 * f + k], b = indices[3 * f + (k + 1) % 3];
+        if (a > b) std::swap(a, b);
+        if (a == b) continue;
+        auto [it, inserted] = slot.try_emplace((uint64_t(a) << 32) | b, edges.size());
+        if (inserted) {
+          edges.push_back({a, b, int(f), -1, 1});
+        } else {
+          MeshEdge& e = edges[it->second];
+          if (e.face_count == 1) e.face1 = int(f);
+          e.face_count++;
+        }
+      }
   }
   triangle_areas.assign(nt, 0.0f);
   vertex_normals.assign(face_normals ? 0 : vertex_count(), Vec3(0.0f));

@@ -16,6 +16,13 @@ struct PositionSample {
   Vec2 bary{0.0f};  // ... and its barycentrics (b1, b2): the point's material coordinates
 };
 
+// An undirected edge of the welded mesh with the triangles around it.
+struct MeshEdge {
+  uint32_t a, b;      // vertices, a < b
+  int face0, face1;   // first two triangles (face1 = -1 on a boundary edge)
+  int face_count;     // 1: boundary, 2: manifold, more: non-manifold
+};
+
 struct Mesh {
   std::vector<float> positions;      // 3 floats per vertex, world space (differentiable later)
   std::vector<uint32_t> indices;     // 3 per triangle
@@ -25,6 +32,7 @@ struct Mesh {
   // Derived state, recomputed by update_derived() after positions change.
   std::vector<Vec3> vertex_normals;
   std::vector<uint32_t> vertex_face_offsets, vertex_faces;  // CSR: triangles around each vertex
+  std::vector<MeshEdge> edges;                               // built once: the topology is fixed
   std::vector<float> triangle_areas;
   Distribution1D area_distribution;  // triangles by area
   float total_area = 0.0f;
@@ -32,6 +40,11 @@ struct Mesh {
   size_t vertex_count() const { return positions.size() / 3; }
   size_t triangle_count() const { return indices.size() / 3; }
   Vec3 vertex(uint32_t i) const { return Vec3(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]); }
+  // Unit normal of triangle f from its winding, in double precision.
+  Vec3d face_normal(int f) const {
+    const Vec3 p0 = vertex(indices[3 * f]), p1 = vertex(indices[3 * f + 1]), p2 = vertex(indices[3 * f + 2]);
+    return glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
+  }
 
   void update_derived();
   // Surface record at barycentrics (b1, b2) of triangle `prim`.
