@@ -20,6 +20,7 @@ METHODS = {
     "interior": {"spp_primary": 0, "spp_boundary": 0},
     "primary": {"spp_boundary": 0},
     "full": {},
+    "grid": {"guiding": "grid"},
 }
 
 

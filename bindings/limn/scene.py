@@ -117,8 +117,8 @@ class Scene:
     def _diff_options(self, spp, spp_interior, spp_primary, spp_boundary, guiding, seed):
         if not self._differentiable:
             raise ValueError(f"{self._native.source}: no differentiable parameters; call set_differentiable() first")
-        if guiding != "none":
-            raise ValueError(f"guiding '{guiding}' is not implemented yet (only 'none')")
+        if guiding not in ("none", "grid"):
+            raise ValueError(f"guiding must be 'none' or 'grid' (got '{guiding}'); projective sampling and octrees are not implemented yet")
         if seed < 0:
             raise ValueError(f"seed must be >= 0 (got {seed})")
         interior = spp_interior if spp_interior is not None else (spp or self.spp)
@@ -140,8 +140,8 @@ class Scene:
                 warnings.warn(f"{self._native.source}: {line}", stacklevel=3)
 
     def render_forward(self, tangents: dict, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
-                       spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none", threads: int = 0,
-                       progress=None) -> np.ndarray:
+                       spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none",
+                       grid_resolution: int = 32, guiding_spp: int = 4, threads: int = 0, progress=None) -> np.ndarray:
         """Derivative image d(image)/d(theta) along ``tangents`` ({name: array shaped like the
         parameter}; differentiable parameters that are not listed get a zero tangent).
 
@@ -149,8 +149,9 @@ class Scene:
         sampler) and the primary-visibility boundary term for silhouettes seen directly
         (``spp_primary`` samples per pixel on average, default the same; 0 switches it off), and the
         indirect boundary term for mesh edges: shadows and silhouettes seen in reflections
-        (``spp_boundary``, default the same; uniform sampling of edges and directions, the
-        unguided baseline). Spheres have no indirect boundary term yet: a warning says so.
+        (``spp_boundary``, default the same; ``guiding="none"`` samples edges and directions
+        uniformly, ``"grid"`` guides them with a uniform grid of ``grid_resolution`` cells along
+        the edges (and R/4 x R/2 over directions) filled with ``guiding_spp`` points per cell). Spheres have no indirect boundary term yet: a warning says so.
         ``last_stats["summary"]`` lists what was computed and what was skipped."""
         interior, primary, boundary = self._diff_options(spp, spp_interior, spp_primary, spp_boundary, guiding, seed)
         for n in tangents:
@@ -165,13 +166,14 @@ class Scene:
             if not np.isfinite(t).all():
                 raise ValueError(f"tangent of '{n}' has non-finite values")
             arrays.append(np.ascontiguousarray(t))
-        image, stats = self._native.render_forward(self._differentiable, arrays, interior, primary, boundary, seed, threads, progress)
+        image, stats = self._native.render_forward(self._differentiable, arrays, interior, primary, boundary, seed, threads, progress,
+                                                   guiding, grid_resolution, guiding_spp)
         self._report(stats)
         return image
 
     def render_backward(self, adjoint, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
-                        spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none", threads: int = 0,
-                        progress=None) -> dict:
+                        spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none",
+                        grid_resolution: int = 32, guiding_spp: int = 4, threads: int = 0, progress=None) -> dict:
         """Gradient of sum(adjoint * image) for every differentiable parameter, as {name: array
         shaped like the parameter}. ``adjoint`` is a (H, W, 3) array, e.g. dLoss/dImage.
         Same terms and caveats as :meth:`render_forward`."""
@@ -180,7 +182,7 @@ class Scene:
         if a.shape != (self.height, self.width, 3):
             raise ValueError(f"adjoint must have shape {(self.height, self.width, 3)}, got {a.shape}")
         grads, stats = self._native.render_backward(self._differentiable, np.ascontiguousarray(a), interior, primary, boundary,
-                                                    seed, threads, progress)
+                                                    seed, threads, progress, guiding, grid_resolution, guiding_spp)
         self._report(stats)
         return dict(zip(self._differentiable, grads))
 

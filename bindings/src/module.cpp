@@ -77,8 +77,12 @@ py::dict diff_stats_dict(const DiffStats& st) {
   return d;
 }
 
-DiffOptions diff_options(int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads) {
+DiffOptions diff_options(int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads,
+                         const std::string& guiding, int grid_resolution, int guiding_spp) {
   DiffOptions o;
+  o.guiding = guiding;
+  o.grid_resolution = grid_resolution;
+  o.guiding_spp = guiding_spp;
   o.spp_interior = spp_interior;
   o.spp_primary = spp_primary;
   o.spp_boundary = spp_boundary;
@@ -122,7 +126,8 @@ py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int thr
 }
 
 py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::string>& names, const std::vector<py::array>& tangents,
-                            int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress) {
+                            int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress,
+                            const std::string& guiding, int grid_resolution, int guiding_spp) {
   const DiffParams params(*scene, names);
   if (tangents.size() != params.params().size()) throw std::invalid_argument("one tangent per differentiable parameter expected");
   std::vector<double> t(params.slot_count(), 0.0);
@@ -132,7 +137,7 @@ py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::str
     if (!a || size_t(a.size()) != p.size) throw std::invalid_argument("tangent of '" + p.name + "' has the wrong size");
     std::copy(a.data(), a.data() + a.size(), t.begin() + long(p.offset));
   }
-  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads);
+  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads, guiding, grid_resolution, guiding_spp);
   std::exception_ptr error;
   opt.progress = progress_adapter(progress, error);
   DiffStats st;
@@ -142,10 +147,11 @@ py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::str
 }
 
 py::tuple render_backward_py(const SceneHandle& scene, const std::vector<std::string>& names, const py::array& adjoint,
-                             int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress) {
+                             int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress,
+                             const std::string& guiding, int grid_resolution, int guiding_spp) {
   const DiffParams params(*scene, names);
   Image adj = numpy_to_image(adjoint);
-  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads);
+  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads, guiding, grid_resolution, guiding_spp);
   std::exception_ptr error;
   opt.progress = progress_adapter(progress, error);
   DiffStats st;
@@ -188,10 +194,10 @@ PYBIND11_MODULE(_core, m) {
       .def("update", &Scene::update, "Apply parameter edits; returns the names that changed")
       .def("render_forward", &render_forward_py, py::arg("names"), py::arg("tangents"), py::arg("spp_interior") = 0,
            py::arg("spp_primary") = 0, py::arg("spp_boundary") = 0, py::arg("seed") = 0, py::arg("threads") = 0,
-           py::arg("progress") = py::none())
+           py::arg("progress") = py::none(), py::arg("guiding") = "none", py::arg("grid_resolution") = 32, py::arg("guiding_spp") = 4)
       .def("render_backward", &render_backward_py, py::arg("names"), py::arg("adjoint"), py::arg("spp_interior") = 0,
            py::arg("spp_primary") = 0, py::arg("spp_boundary") = 0, py::arg("seed") = 0, py::arg("threads") = 0,
-           py::arg("progress") = py::none())
+           py::arg("progress") = py::none(), py::arg("guiding") = "none", py::arg("grid_resolution") = 32, py::arg("guiding_spp") = 4)
       .def_property_readonly("width", [](const Scene& s) { return s.camera.width; })
       .def_property_readonly("height", [](const Scene& s) { return s.camera.height; })
       .def_property_readonly("spp", [](const Scene& s) { return s.spp; })

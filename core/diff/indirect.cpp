@@ -11,7 +11,8 @@ namespace {
 using ad::Var;
 using VV = ad::V3<Var>;
 
-// Extra observing vertices traced for unbounded paths (importance beyond the first bounce).
+// Extra observing vertices traced for unbounded paths (importance beyond the first bounce); longer
+// camera sub-paths are not traced (a truncation, said in docs/derivatives.md).
 constexpr int kImportanceBounces = 4;
 
 uint32_t opposite_vertex(const Mesh& m, int f, uint32_t a, uint32_t b) {
@@ -35,8 +36,9 @@ bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const Sur
   pixel = proj.pixel(si.p, glm::dot(si.ng, wc), area_to_film);
   if (pixel < 0) return false;
   const Vec3 wi = si.frame.to_local(wc), wo = si.frame.to_local(w_light);
-  // Shading-normal leaks, as in the path tracer.
-  if (glm::dot(wc, si.ng) * wi.z <= 0.0f || glm::dot(w_light, si.ng) * wo.z <= 0.0f || wo.z == 0.0f) return false;
+  // Shading-normal leaks on the light side only, as in the path tracer (the viewer side is decided
+  // by the geometric normal, `front`).
+  if (glm::dot(w_light, si.ng) * wo.z <= 0.0f || wo.z == 0.0f) return false;
   const Bsdf& bsdf = scene.bsdfs[scene.shapes[si.shape].bsdf];
   const Spectrum f = bsdf.eval(wi, wo, si.uv, glm::dot(wc, si.ng) > 0.0f) / std::abs(wo.z);  // f alone: the ray measure has the cosine
   if (is_black(f)) return false;
@@ -80,10 +82,32 @@ IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params)
 
 void IndirectBoundary::sample(Pcg32& rng, PathInputs& in, std::vector<Splat>& splats, std::vector<Var>& velocities,
                               uint64_t& rays) const {
-  const size_t k = m_select.sample_discrete(rng.next_float());
+  const Vec3 u(rng.next_float(), rng.next_float(), rng.next_float());
+  sample_at(u, 1.0f, 1.0f, rng, in, splats, velocities, rays);
+}
+
+float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
+  // |L_d W sin(phi)| of the uniform-direction term, without the velocity (it depends on the
+  // tangent or adjoint, unknown when the guide is built).
+  Pcg32 rng(seed, 0x6775696465ULL);
+  PathInputs in;
+  std::vector<Splat> splats;
+  std::vector<Var> vel;
+  uint64_t rays = 0;
+  sample_at(u, 1.0f, 1.0f, rng, in, splats, vel, rays, /*delta_terms=*/false);
+  float v = 0.0f;
+  for (const Splat& sp : splats) v += luminance(glm::abs(sp.value));
+  return v;
+}
+
+void IndirectBoundary::sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& in, std::vector<Splat>& splats,
+                                 std::vector<Var>& velocities, uint64_t& rays, bool delta_terms) const {
+  // Boundary sample space: u.x picks the edge by length and the point on it, (u.y, u.z) the
+  // direction (uniform on the sphere). pdf_u is the guide's density on [0,1)^3, pdf_u0 that of u.x.
+  size_t k;
+  const float lambda = m_select.sample_remapped(u.x, &k);
   const BoundaryEdge& e = m_edges[k];
   const Mesh& m = m_scene.shapes[e.shape].mesh();
-  const float lambda = rng.next_float();
   const Vec3 a = m.vertex(e.a), b = m.vertex(e.b);
   const Vec3 xb = a + lambda * (b - a);
   // x_b on the tape; the edge point is chosen per unit length: pdf = 1 / total length.
@@ -98,20 +122,22 @@ void IndirectBoundary::sample(Pcg32& rng, PathInputs& in, std::vector<Splat>& sp
   const float pdf_point = float(1.0 / m_total_length);
 
   // Uniform directions for everything but the Dirac deltas of point and directional lights.
-  const Vec3 w = warp::square_to_uniform_sphere(rng.next_2d());
+  const Vec3 w = warp::square_to_uniform_sphere(Vec2(u.y, u.z));
   // Radiance probes and importance paths need independent random numbers (E[L_d W] is wanted, not
   // a product of correlated estimates): a stream of their own for the importance paths.
-  const Pcg32 base = rng;
   const uint64_t seed = (uint64_t(rng.next_u32()) << 32) | rng.next_u32();
   const Pcg32 importance_rng(seed, 0x696d706f7274616eULL);
-  evaluate_direction(e, xb, w, pdf_point * warp::square_to_uniform_sphere_pdf(), false, -1, base, importance_rng, in, xb_var,
-                     splats, velocities, rays);
+  const Pcg32 base = rng;
+  evaluate_direction(e, xb, w, pdf_u * pdf_point * warp::square_to_uniform_sphere_pdf(), false, -1, base, importance_rng, in,
+                     xb_var, splats, velocities, rays);
+  if (!delta_terms) return;
   for (int li : m_delta_lights) {
     Vec3 wl;  // from the light through x_b, towards the observing side
     if (const auto* p = std::get_if<PointEmitter>(&m_scene.emitters[li].model)) wl = xb - p->position;
     else wl = std::get<DirectionalEmitter>(m_scene.emitters[li].model).direction;
     if (!(glm::length(wl) > 0.0f)) continue;
-    evaluate_direction(e, xb, glm::normalize(wl), pdf_point, true, li, base, importance_rng, in, xb_var, splats, velocities, rays);
+    evaluate_direction(e, xb, glm::normalize(wl), pdf_u0 * pdf_point, true, li, base, importance_rng, in, xb_var, splats,
+                       velocities, rays);
   }
 }
 
@@ -161,7 +187,8 @@ void IndirectBoundary::evaluate_direction(const BoundaryEdge& e, const Vec3& xb,
     SurfaceInteraction cur = y;
     Vec3 w_light = -w;  // at the observing vertex, light comes from the edge
     Pcg32 rng = rng_importance;
-    const int bounces = max_depth < 0 ? kImportanceBounces : 0;
+    // Bounded paths: camera -> ... -> observer (j segments) + probe segment + 1 more at least.
+    const int bounces = max_depth < 0 ? kImportanceBounces : max_depth - 2;
     for (int j = 1;; ++j) {
       int pixel;
       Spectrum v;
@@ -170,10 +197,15 @@ void IndirectBoundary::evaluate_direction(const BoundaryEdge& e, const Vec3& xb,
       if (j > bounces) break;
       // Continue the importance path by BSDF sampling (adjoint of reflection; reciprocal BSDFs).
       const Bsdf& bsdf = m_scene.bsdfs[m_scene.shapes[cur.shape].bsdf];
-      const auto bs = bsdf.sample(cur.frame.to_local(w_light), rng.next_float(), rng.next_2d(), cur.uv, glm::dot(w_light, cur.ng) > 0.0f);
+      // Sampled from the light side (reciprocal reflection); the leak test belongs to the light side
+      // and the sampled, viewer-side direction must stay on the same geometric side.
+      const Vec3 wl_local = cur.frame.to_local(w_light);
+      const bool light_front = glm::dot(w_light, cur.ng) > 0.0f;
+      if ((light_front ? 1.0f : -1.0f) * wl_local.z <= 0.0f) break;
+      const auto bs = bsdf.sample(wl_local, rng.next_float(), rng.next_2d(), cur.uv, light_front);
       if (!bs) break;
       const Vec3 wo = cur.frame.to_world(bs->wo);
-      if (glm::dot(wo, cur.ng) * bs->wo.z <= 0.0f) break;
+      if ((glm::dot(wo, cur.ng) > 0.0f) != light_front) break;
       throughput *= bs->weight;
       SurfaceInteraction next;
       rays++;
@@ -209,8 +241,10 @@ void IndirectBoundary::evaluate_direction(const BoundaryEdge& e, const Vec3& xb,
         rays++;
         L[side] = m_scene.occluded(shadow) ? Spectrum(0.0f) : value;
       } else {
-        // From just beside x_b on the observing side (half way to the observer at most) along -w.
-        const float back = std::min(0.5f * dist_y, 1e-2f * edge_len + 1e-5f);
+        // From beside x_b, half way towards the observer, along -w: the segment to the observer is
+        // empty, and starting that far out the occluder-side probe cannot begin inside the occluder
+        // (a start close to x_b does for faces nearly parallel to w).
+        const float back = 0.5f * dist_y;
         Pcg32 r = rng0;
         PathCounters counters;
         L[side] = path_radiance(m_scene, Ray{probe + back * w, -w, 0.0f, kInfinity}, r, counters, PathLimits{budget, false});

@@ -7,8 +7,8 @@
 // along +w to the observing surface and connected to the camera there (and, for unbounded paths,
 // at further BSDF-sampled vertices), sin(phi) = |t x w| and n_b = (t x w) / |t x w|.
 //
-// Sampling ("guiding: none", the uniform baseline): an edge proportionally to its length, a point
-// uniformly on it, a direction uniformly on the sphere. Point and directional lights put a Dirac
+// Sampling: boundary sample space [0,1)^3 = (edge point by length, direction on the sphere);
+// "guiding: none" samples it uniformly, "grid" with core/guiding/grid.h. Point and directional lights put a Dirac
 // delta into L_d: for each of them a second direction, the one from the light through x_b, is
 // evaluated as its own term (shadow edges of delta lights).
 //
@@ -46,6 +46,12 @@ class IndirectBoundary {
   };
   void sample(Pcg32& rng, PathInputs& inputs, std::vector<Splat>& splats, std::vector<ad::Var>& velocities,
               uint64_t& rays) const;
+  // The same at a given point u of the boundary sample space [0,1)^3, chosen with density pdf_u
+  // (pdf_u0: density of u.x alone, used by the delta-light terms that ignore u.y, u.z).
+  void sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& inputs, std::vector<Splat>& splats,
+                 std::vector<ad::Var>& velocities, uint64_t& rays, bool delta_terms = true) const;
+  // Magnitude of the uniform-direction term at u (what grid guiding tabulates).
+  float guide_value(const Vec3& u, uint64_t seed) const;
 
  private:
   // Evaluates one direction w at edge point x_b; appends splats (value already divided by pdf_w).

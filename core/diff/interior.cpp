@@ -99,7 +99,8 @@ struct Replay {
       const Var b1(bary.x), b2(bary.y);
       x.p = v0 * (Var(1.0) - b1 - b2) + v1 * b1 + v2 * b2;
       mesh_surface(shape, prim, v0, v1, v2, b1, b2, x);
-      x.jacobian = length(cross(v1 - v0, v2 - v0)) / Var(2.0 * double(sh.mesh().triangle_areas[prim]));
+      const Var area2 = length(cross(v1 - v0, v2 - v0));
+      x.jacobian = area2 / Var(area2.v);  // 1 at the primal point, exactly
     } else {
       VV c;
       Var r;
@@ -219,17 +220,18 @@ struct Replay {
     }
     const auto& d = std::get<Dielectric>(b.model);
     const Var F = diff::fresnel_dielectric(cos_i, double(d.eta));
-    const double F0 = F.v;
-    if (bs.eta == 1.0f) {  // reflection, chosen with probability F0
+    // Divided by the primal lobe probability bs.pdf (F or 1 - F in float), not a double recomputation
+    // that can disagree with it next to the critical angle.
+    if (bs.wo.z * dot(wi_world, x.ns).v > 0.0) {  // reflection
       wo_world = diff::reflect(wi_world, x.ns);
-      return constant(d.specular_reflectance) * (F / Var(F0));
+      return constant(d.specular_reflectance) * (F / Var(bs.pdf));
     }
     const bool outside = cos_i.v >= 0.0;
     const double eta_ti = outside ? 1.0 / d.eta : d.eta;
     const Var cos_t2 = Var(1.0) - Var(eta_ti * eta_ti) * (Var(1.0) - cos_i * cos_i);
     const Var cos_t = sqrt(cos_t2) * Var(outside ? -1.0 : 1.0);
     wo_world = x.ns * (Var(eta_ti) * cos_i + cos_t) - wi_world * Var(eta_ti);
-    return constant(d.specular_transmittance) * ((Var(1.0) - F) / Var(1.0 - F0) * Var(eta_ti * eta_ti));
+    return constant(d.specular_transmittance) * ((Var(1.0) - F) / Var(bs.pdf) * Var(eta_ti * eta_ti));
   }
 };
 

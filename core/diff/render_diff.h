@@ -3,8 +3,8 @@
 // Implemented: the interior term (interior.h) for every parameter kind, the primary-visibility
 // boundary term (primary.h) for meshes and spheres, and the perimeter part of the indirect
 // boundary term (indirect.h: shadows and silhouettes seen in reflections) for meshes, unguided.
-// Not implemented yet: the indirect term of spheres (curvature part of Eq. 4) and guiding; the
-// summary says what was computed and what is missing.
+// Guiding: "none" or "grid" (uniform grid, no projection yet). Not implemented yet: the indirect
+// term of spheres (curvature part of Eq. 4); the summary says what was computed and what is missing.
 #pragma once
 #include <functional>
 #include <string>
@@ -18,6 +18,9 @@ struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
   int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
   int spp_boundary = 0;   // indirect boundary samples, per pixel on average (0: off)
+  std::string guiding = "none";  // indirect boundary: "none" (uniform) or "grid" (core/guiding/grid.h)
+  int grid_resolution = 32;      // grid cells along the edge axis; (R/4, R/2) along the direction axes
+  int guiding_spp = 4;           // random points per grid cell when the grid is built
   uint64_t seed = 0;
   int threads = 0;
   std::function<bool(float)> progress;

@@ -47,6 +47,15 @@ class Distribution1D {
     const float x = float((double(i) + du) / double(m_func.size()));
     return std::min(x, std::nextafter(float(double(i + 1) / double(m_func.size())), 0.0f));
   }
+  // Picks bin i for u and returns where u fell inside bin i's share of [0,1), rescaled to [0,1):
+  // a second uniform number for free, so a 1D sample chooses both the bin and a point inside it.
+  float sample_remapped(float u, size_t* bin) const {
+    const size_t i = sample_discrete(u);
+    *bin = i;
+    const double lo = m_cdf[i], hi = m_cdf[i + 1];
+    const double f = hi > lo ? (double(u) - lo) / (hi - lo) : 0.5;
+    return float(std::clamp(f, 0.0, 1.0 - 1e-7));
+  }
   size_t sample_discrete(float u) const {
     // First i with cdf[i+1] > u, skipping empty bins.
     auto it = std::upper_bound(m_cdf.begin() + 1, m_cdf.end(), double(u));

@@ -205,8 +205,8 @@ def test_api_errors():
         scene.render_forward({"floor.reflectance": np.ones(4)})
     with pytest.raises(ValueError, match="spp_boundary must be >= 0"):
         scene.render_forward({"floor.reflectance": np.ones(3)}, spp_boundary=-1)
-    with pytest.raises(ValueError, match="guiding 'grid' is not implemented"):
-        scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="grid")
+    with pytest.raises(ValueError, match="guiding must be 'none' or 'grid'"):
+        scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="octree")
     with pytest.raises(ValueError, match="adjoint must have shape"):
         scene.render_backward(np.ones((2, 2, 3)))
 

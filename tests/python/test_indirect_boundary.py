@@ -32,7 +32,10 @@ AREA = {"type": "rectangle", "to_world": [{"rotate": {"axis": [1, 0, 0], "angle"
         "emitter": {"type": "area", "radiance": 10.0}}
 
 
-def compare(scene, name, t, spp_boundary, seeds=4, fd_spp=1024):
+def compare(scene, name, t, spp_boundary, seeds=8, fd_spp=1024):
+    """Block z-scores (test_derivatives.block_z) of the derivative with and without the indirect
+    term against FD. The per-block spread is estimated from `seeds` runs (t-distributed with
+    seeds - 1 degrees of freedom: 8 seeds keep a |z| > 5 false alarm near 0.1 % per block)."""
     fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=fd_spp, seed=k, cache=False) for k in range(seeds)])
     on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=spp_boundary, seed=50 + k) for k in range(seeds)])
     off = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=0, seed=50 + k) for k in range(seeds)])
@@ -47,7 +50,7 @@ def test_moving_occluder_shadow(light, spp_boundary):
     t[:, 0] = 1.0
     scene.set_differentiable([name])
     z_on, z_off = compare(scene, name, t, spp_boundary)
-    assert np.abs(z_on).max() < 4.5, z_on
+    assert np.abs(z_on).max() < 5.0, z_on
     assert np.abs(z_off).max() > 10, z_off  # the shadow's blocks are far off without the term
     quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=spp_boundary)
     assert any("indirect boundary: " + str(spp_boundary) in line for line in scene.last_stats["summary"])
@@ -68,21 +71,25 @@ def glossy_scene(emitter_reflectance):
 
 @pytest.mark.parametrize("emitter_reflectance", [
     0.0,
-    pytest.param(0.5, marks=pytest.mark.xfail(strict=True, reason=(
-        "known bias, not found yet: where the camera sees the diffuse emitter surface reflecting the "
-        "moving shape, the indirect term is off by ~1e-3 of the image derivative's peak (FD at 16k spp); "
-        "see the issue note"))),
+    pytest.param(0.5, marks=pytest.mark.xfail(strict=False, reason=(
+        "known bias: where the camera sees the diffuse emitter reflecting the plane and the cube, the "
+        "indirect term was off by ~1e-3 of the derivative's peak; tracing importance beyond the first "
+        "observing vertex for bounded paths halved it, ~5e-4 remains (block (0,1): -1.2e-3 vs FD -0.8e-3); "
+        "not strict: it passes on some seeds"))),
 ])
 def test_silhouette_seen_in_a_glossy_reflection(emitter_reflectance):
     """The paper's test scene (a shape in front of a large area emitter, seen in a rough conductor
-    plane), at alpha = 0.2: at 0.005 uniform sampling of directions is hopeless, that needs guiding."""
+    plane), at alpha = 0.2: at 0.005 uniform sampling of directions is hopeless, that needs guiding.
+    With a reflective emitter, the cube's shadow on the plane is also seen in the emitter's
+    reflection (camera -> emitter -> plane -> light), which needs importance beyond the first
+    observing vertex for bounded paths."""
     scene = limn.load_dict(glossy_scene(emitter_reflectance))
     name = "shape.vertex_positions"
     t = np.zeros_like(scene.params[name])
     t[:, 0] = 1.0
     scene.set_differentiable([name])
     z_on, z_off = compare(scene, name, t, 512)
-    assert np.abs(z_on).max() < 4.5, z_on
+    assert np.abs(z_on).max() < 5.0, z_on
     assert np.abs(z_off).max() > 6, z_off
 
 
@@ -107,3 +114,27 @@ def test_spheres_say_what_is_missing():
     scene.set_differentiable(["ball.center"])
     with pytest.warns(UserWarning, match="indirect boundary of spheres: NOT COMPUTED"):
         scene.render_forward({"ball.center": np.float32([1, 0, 0])}, spp=4)
+
+
+def test_grid_guiding_agrees_and_lowers_the_error():
+    """Area-light shadow: grid guiding must agree with finite differences and, at equal boundary
+    samples, beat uniform sampling of the boundary sample space."""
+    scene = limn.load_dict(shadow_scene(AREA))
+    name = "box.vertex_positions"
+    t = np.zeros_like(scene.params[name])
+    t[:, 0] = 1.0
+    scene.set_differentiable([name])
+    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=1024, seed=k, cache=False) for k in range(8)])
+    ref = fd.mean(0)
+    def run(guiding, k):
+        return quiet(scene.render_forward, {name: t}, spp=16, spp_primary=16, spp_boundary=64, guiding=guiding,
+                     grid_resolution=32, guiding_spp=4, seed=70 + k)
+    grid = np.stack([run("grid", k) for k in range(8)])
+    uniform = np.stack([run("none", k) for k in range(8)])
+    assert any("guiding grid 32x8x16" in line for line in (quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1,
+                                                                    guiding="grid") is not None and scene.last_stats["summary"]))
+    z = block_z(grid, fd)
+    assert np.abs(z).max() < 5.0, z
+    err = lambda s: float(np.sqrt(((s - ref) ** 2).mean(axis=(1, 2, 3))).mean())
+    print(f"rmse grid {err(grid):.4f} uniform {err(uniform):.4f}")
+    assert err(grid) < err(uniform), (err(grid), err(uniform))
