@@ -141,6 +141,15 @@ void fill_stats(DiffStats* stats, std::chrono::steady_clock::time_point start, u
   stats->summary = std::move(summary);
 }
 
+// One camera path of pixel (x, y) replayed on a cleared tape (the same film sample as render()).
+ad::V3<ad::Var> replay_camera_path(const Scene& scene, const DiffParams& params, int x, int y, Pcg32& rng, PathInputs& in,
+                                   PathCounters& counters) {
+  ad::Tape::current().clear();
+  in.clear();
+  const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();
+  return interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters);
+}
+
 bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
   for (const auto& [node, slot] : in.nodes)
     if (!std::isfinite(adj[node])) return false;
@@ -230,10 +239,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     double sum[3] = {0, 0, 0};
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      ad::Tape::current().clear();
-      in.clear();
-      const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();
-      const ad::V3<ad::Var> L = interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters);
+      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters);
       double d[3] = {0, 0, 0};
       bool ok = std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v);
       for (int c = 0; c < 3 && ok; ++c) {
@@ -297,10 +303,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     PathCounters counters;
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      ad::Tape::current().clear();
-      in.clear();
-      const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();
-      const ad::V3<ad::Var> L = interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters);
+      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters);
       if (!(std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v))) {
         ++bad;
         continue;
