@@ -60,4 +60,12 @@ struct PathInputs {
   void clear() { nodes.clear(); }
 };
 
+// Differentiable geometry as tape variables (constants where nothing is differentiable):
+// mesh vertex i, sphere centre and radius of shape `shape`, including its translation parameter.
+ad::V3<ad::Var> diff_vertex(const Scene& scene, const DiffParams& params, PathInputs& in, int shape, uint32_t i);
+ad::V3<ad::Var> diff_sphere_center(const Scene& scene, const DiffParams& params, PathInputs& in, int shape);
+ad::Var diff_sphere_radius(const Scene& scene, const DiffParams& params, PathInputs& in, int shape);
+// Whether any parameter moves the geometry of `shape`.
+bool moves_geometry(const DiffParams& params, int shape);
+
 }  // namespace limn

@@ -111,13 +111,7 @@ void IndirectBoundary::sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32
   const Vec3 a = m.vertex(e.a), b = m.vertex(e.b);
   const Vec3 xb = a + lambda * (b - a);
   // x_b on the tape; the edge point is chosen per unit length: pdf = 1 / total length.
-  const long slot = m_params.slot(Parameter::Kind::VertexPositions, e.shape);
-  auto vertex = [&](uint32_t i) {
-    const Vec3 v = m.vertex(i);
-    const long base = slot + 3 * long(i);
-    return VV(in.make(v.x, base), in.make(v.y, base + 1), in.make(v.z, base + 2));
-  };
-  const VV va = vertex(e.a), vb = vertex(e.b);
+  const VV va = diff_vertex(m_scene, m_params, in, e.shape, e.a), vb = diff_vertex(m_scene, m_params, in, e.shape, e.b);
   const VV xb_var = va + (vb - va) * Var(lambda);
   const float pdf_point = float(1.0 / m_total_length);
 

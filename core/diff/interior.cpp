@@ -31,18 +31,11 @@ struct Replay {
   PathInputs& in;
 
   // ---- geometry ---------------------------------------------------------------------------------
-  VV vertex(int shape, uint32_t i) const {
-    const Mesh& m = scene.shapes[shape].mesh();
-    const long slot = params.slot(Parameter::Kind::VertexPositions, shape);
-    const float* p = &m.positions[3 * size_t(i)];
-    if (slot < 0) return VV(Var(p[0]), Var(p[1]), Var(p[2]));
-    const long base = slot + 3 * long(i);
-    return VV(in.make(p[0], base), in.make(p[1], base + 1), in.make(p[2], base + 2));
-  }
+  VV vertex(int shape, uint32_t i) const { return diff_vertex(scene, params, in, shape, i); }
   // Area-weighted vertex normal from the triangles around vertex i (as Mesh::update_derived).
   VV vertex_normal(int shape, uint32_t i) const {
     const Mesh& m = scene.shapes[shape].mesh();
-    if (params.slot(Parameter::Kind::VertexPositions, shape) < 0) return constant(m.vertex_normals[i]);
+    if (params.slot(Parameter::Kind::VertexPositions, shape) < 0) return constant(m.vertex_normals[i]);  // a translation keeps normals
     VV sum;
     for (uint32_t k = m.vertex_face_offsets[i]; k < m.vertex_face_offsets[i + 1]; ++k) {
       const uint32_t f = m.vertex_faces[k];
@@ -83,10 +76,8 @@ struct Replay {
     }
   }
   void sphere_params(int shape, VV& c, Var& r) const {
-    const Sphere& s = scene.shapes[shape].sphere();
-    const long cs = params.slot(Parameter::Kind::SphereCenter, shape), rs = params.slot(Parameter::Kind::SphereRadius, shape);
-    c = cs < 0 ? constant(s.center) : VV(in.make(s.center.x, cs), in.make(s.center.y, cs + 1), in.make(s.center.z, cs + 2));
-    r = in.make(s.radius, rs);
+    c = diff_sphere_center(scene, params, in, shape);
+    r = diff_sphere_radius(scene, params, in, shape);
   }
 
   // A vertex attached to its surface at the primal point's material coordinates.

@@ -118,23 +118,13 @@ bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& d
   ad::V3<double> dP;       // d(point)/d(curve parameter)
   double pdf_param;        // density of the curve parameter
   if (shape.is_mesh()) {
-    const Mesh& m = shape.mesh();
-    const long slot = m_params.slot(Parameter::Kind::VertexPositions, c.shape);
-    auto vertex = [&](int i) {
-      const Vec3 v = m.vertex(uint32_t(i));
-      const long base = slot + 3 * long(i);
-      return VV(in.make(v.x, base), in.make(v.y, base + 1), in.make(v.z, base + 2));
-    };
-    const VV a = vertex(c.a), b = vertex(c.b);
+    const VV a = diff_vertex(m_scene, m_params, in, c.shape, uint32_t(c.a)), b = diff_vertex(m_scene, m_params, in, c.shape, uint32_t(c.b));
     P = a + (b - a) * Var(u);
     dP = ad::values(b - a);
     pdf_param = 1.0;
   } else {
-    const Sphere& s = shape.sphere();
-    const long cs = m_params.slot(Parameter::Kind::SphereCenter, c.shape), rs = m_params.slot(Parameter::Kind::SphereRadius, c.shape);
-    const VV center = cs < 0 ? VV(Var(s.center.x), Var(s.center.y), Var(s.center.z))
-                             : VV(in.make(s.center.x, cs), in.make(s.center.y, cs + 1), in.make(s.center.z, cs + 2));
-    const Var r = in.make(s.radius, rs);
+    const VV center = diff_sphere_center(m_scene, m_params, in, c.shape);
+    const Var r = diff_sphere_radius(m_scene, m_params, in, c.shape);
     VV q, e1, e2;
     Var rho;
     if (!outline(center, r, eye, q, rho, e1, e2)) return false;

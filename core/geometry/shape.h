@@ -16,6 +16,7 @@ struct Shape {
   ShapeGeometry geometry;
   int bsdf = -1;           // index into Scene::bsdfs
   int emitter = -1;        // index into Scene::emitters (an area emitter), or -1
+  Vec3 translation{0.0f};  // "<id>.to_world.translation": rigid motion applied on top of the geometry
 
   bool is_mesh() const { return std::holds_alternative<Mesh>(geometry); }
   const Mesh& mesh() const { return std::get<Mesh>(geometry); }

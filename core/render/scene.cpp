@@ -34,6 +34,7 @@ void Scene::collect_parameters() {
       m_params.push_back({s.id + ".center", Parameter::Kind::SphereCenter, int(i), &sp.center.x, {3}});
       m_params.push_back({s.id + ".radius", Parameter::Kind::SphereRadius, int(i), &sp.radius, {}});
     }
+    m_params.push_back({s.id + ".to_world.translation", Parameter::Kind::Translation, int(i), &s.translation.x, {3}});
   }
   for (size_t i = 0; i < bsdfs.size(); ++i) {
     Bsdf& b = bsdfs[i];
@@ -86,6 +87,7 @@ void Scene::validate_parameter(const Parameter& p) const {
   switch (p.kind) {
     case Parameter::Kind::VertexPositions:
     case Parameter::Kind::SphereCenter:
+    case Parameter::Kind::Translation:
       for (size_t i = 0; i < n; i += 3)
         if (!std::isfinite(p.data[i]) || !std::isfinite(p.data[i + 1]) || !std::isfinite(p.data[i + 2]))
           throw std::invalid_argument(where + ": " + (p.kind == Parameter::Kind::SphereCenter ? "center" : "vertex " + std::to_string(i / 3)) +
@@ -115,6 +117,8 @@ void Scene::apply_parameter(const Parameter& p) {
     case Parameter::Kind::SphereRadius:
       m_accel->shape_changed(p.index);
       break;
+    case Parameter::Kind::Translation:
+      break;  // applied in update(), which knows the previous value
     case Parameter::Kind::Reflectance:
     case Parameter::Kind::Alpha:
     case Parameter::Kind::EmitterValue:
@@ -143,6 +147,21 @@ std::vector<std::string> Scene::update() {
   bool geometry = false;
   std::vector<std::string> names;
   for (size_t i : changed) {
+    if (m_params[i].kind == Parameter::Kind::Translation) {
+      // Move the geometry by the change of the translation; its positions (or centre) parameter
+      // then holds the moved values, and its snapshot follows so the move is not seen twice.
+      const Parameter& p = m_params[i];
+      const Vec3 delta = Vec3(p.data[0], p.data[1], p.data[2]) - Vec3(m_snapshots[i][0], m_snapshots[i][1], m_snapshots[i][2]);
+      Shape& sh = shapes[p.index];
+      const Parameter::Kind target = sh.is_mesh() ? Parameter::Kind::VertexPositions : Parameter::Kind::SphereCenter;
+      for (size_t j = 0; j < m_params.size(); ++j)
+        if (m_params[j].kind == target && m_params[j].index == p.index) {
+          for (size_t k = 0; k < m_params[j].size(); ++k) m_params[j].data[k] += delta[int(k % 3)];
+          apply_parameter(m_params[j]);
+          std::memcpy(m_snapshots[j].data(), m_params[j].data, m_snapshots[j].size() * sizeof(float));
+        }
+      geometry = true;
+    }
     apply_parameter(m_params[i]);
     std::memcpy(m_snapshots[i].data(), m_params[i].data, m_snapshots[i].size() * sizeof(float));
     geometry |= m_params[i].kind == Parameter::Kind::VertexPositions || m_params[i].kind == Parameter::Kind::SphereCenter ||
