@@ -7,6 +7,7 @@
 // image. Values are doubles so that derivatives of normalisations and differences of nearby points
 // keep their precision; the primal renderer stays in float.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -111,6 +112,15 @@ inline Var cos(const Var& a) { return make_unary(std::cos(a.v), a, -std::sin(a.v
 inline Var abs(const Var& a) { return make_unary(std::abs(a.v), a, a.v >= 0.0 ? 1.0 : -1.0); }
 inline Var pow(const Var& a, double p) { return make_unary(std::pow(a.v, p), a, p * std::pow(a.v, p - 1.0)); }
 inline Var atan(const Var& a) { return make_unary(std::atan(a.v), a, 1.0 / (1.0 + a.v * a.v)); }
+inline Var atan2(const Var& y, const Var& x) {
+  const double r2 = x.v * x.v + y.v * y.v;
+  return make_binary(std::atan2(y.v, x.v), y, r2 > 0.0 ? x.v / r2 : 0.0, x, r2 > 0.0 ? -y.v / r2 : 0.0);
+}
+// acos'(+-1) is infinite: clamped to the open interval, the derivative stays finite.
+inline Var acos(const Var& a) {
+  const double c = std::clamp(a.v, -1.0 + 1e-12, 1.0 - 1e-12);
+  return make_unary(std::acos(c), a, -1.0 / std::sqrt(1.0 - c * c));
+}
 inline Var max(const Var& a, const Var& b) { return a.v >= b.v ? a : b; }
 inline Var min(const Var& a, const Var& b) { return a.v <= b.v ? a : b; }
 inline double value(const Var& a) { return a.v; }
@@ -119,7 +129,9 @@ inline double value(double a) { return a; }
 // The same spellings for plain doubles, so templated code instantiates with T = double (used for
 // finite-difference references) and T = Var.
 using std::abs;
+using std::acos;
 using std::atan;
+using std::atan2;
 using std::cos;
 using std::exp;
 using std::log;

@@ -132,8 +132,11 @@ struct Replay {
       const Var t = diff::ray_sphere_t(o, d, c, r, far);
       x.p = o + d * t;
       x.ng = x.ns = (x.p - c) / r;
-      x.u = Var(si.uv.x);
-      x.v = Var(si.uv.y);
+      // The hit slides over the sphere: texture coordinates as Sphere::fill_interaction defines them.
+      const double two_pi = 2.0 * M_PI;
+      const Var phi = atan2(x.ng.y, x.ng.x);
+      x.u = (phi.v < 0.0 ? phi + Var(two_pi) : phi) / Var(two_pi);
+      x.v = acos(x.ng.z) / Var(M_PI);
     }
     return x;
   }

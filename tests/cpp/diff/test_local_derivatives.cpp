@@ -56,6 +56,11 @@ TEST_CASE("ad: elementary operations against finite differences") {
   };
   Pcg32 rng(1);
   for (int k = 0; k < 20; ++k) check_gradient(f, random_vector(rng, 4));
+  auto g = [](const auto& x) {
+    using namespace limn::ad;
+    return atan2(x[0], x[1]) + acos(x[2] * 0.9);
+  };
+  for (int k = 0; k < 20; ++k) check_gradient(g, random_vector(rng, 3));
 }
 
 TEST_CASE("geometry: ray-triangle distance and barycentrics w.r.t. vertices and the ray") {
