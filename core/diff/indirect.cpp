@@ -54,7 +54,7 @@ IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params)
   std::vector<float> lengths;
   for (int si : params.moving_shapes()) {
     const Shape& shape = scene.shapes[si];
-    if (!shape.is_mesh()) continue;  // spheres: the interior (curvature) term is not implemented
+    if (!shape.is_mesh()) continue;  // spheres: their term is the curvature part of Eq. 4, not implemented yet
     const Mesh& m = shape.mesh();
     for (const MeshEdge& e : m.edges) {
       const uint32_t a = e.a, b = e.b;

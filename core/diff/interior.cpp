@@ -313,27 +313,14 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
     const Vec3 wi_local = si.frame.to_local(-ray.d);
     const bool front = glm::dot(ray.d, si.ng) < 0.0f;
 
-    // Next-event estimation (same random numbers and tests as estimate_direct()).
+    // Next-event estimation: the primal sample and its tests (shared with path_radiance()).
     if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty()) {
-      const size_t n = scene.emitters.size();
-      const size_t k = std::min(size_t(rng.next_float() * n), n - 1);
-      const Emitter& e = scene.emitters[k];
-      const Vec2 u = rng.next_2d();
-      const float u_extra = rng.next_float();
-      const EmitterSample es = sample_emitter(e, scene.shapes, si.p, u, u_extra);
-      bool ok = es.pdf > 0.0f && !is_black(es.radiance);
-      Vec3 wo_local(0.0f);
-      if (ok) {
-        wo_local = si.frame.to_local(es.wi);
-        ok = glm::dot(es.wi, si.ng) * wo_local.z > 0.0f && !is_black(bsdf.eval(wi_local, wo_local, si.uv, front));
-      }
-      if (ok) {
-        counters.rays++;
-        ok = !scene.occluded(es.to_infinity ? spawn_ray(si, es.wi) : spawn_ray_to(si, es.p));
-      }
-      if (ok) {
-        const float pdf_light = es.pdf * scene.emitter_selection_pdf();
-        const float w = es.delta || !cfg.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv, front));
+      const DirectLightSample d = sample_direct_light(scene, si, bsdf, wi_local, front, rng, counters);
+      if (d.ok) {
+        const size_t k = d.emitter;
+        const Emitter& e = scene.emitters[k];
+        const EmitterSample& es = d.es;
+        const float pdf_light = d.pdf_light, w = d.mis;
         VV contrib;
         if (const auto* area = std::get_if<AreaEmitter>(&e.model)) {
           const PositionSample& ps = es.position;
@@ -390,8 +377,8 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
     ray = spawn_ray(si, wo);
 
     if (depth + 1 >= cfg.rr_depth) {
-      const float q = std::min(max_component(beta_primal) * eta_scale, 0.95f);
-      if (!(rng.next_float() < q)) break;
+      const float q = russian_roulette(beta_primal, eta_scale, rng);
+      if (q == 0.0f) break;
       beta = beta / Var(q);
       beta_primal /= q;
     }

@@ -84,11 +84,11 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) :
       if (!outline(d3(s.center), double(s.radius), eye, q, rho, e1, e2)) continue;
       // Selection weight: the projected perimeter, from a 64-gon.
       double len = 0;
-      Vec2d prev;
+      Vec2d prev(0.0);
       bool ok = true;
       for (int i = 0; i <= 64 && ok; ++i) {
         const double phi = 2 * M_PI * i / 64;
-        Vec2d cur;
+        Vec2d cur(0.0);
         ok = film_of(q + (e1 * std::cos(phi) + e2 * std::sin(phi)) * rho, cur);
         if (i > 0) len += glm::length(cur - prev);
         prev = cur;

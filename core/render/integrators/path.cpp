@@ -12,30 +12,35 @@ Spectrum area_radiance(const Scene& scene, const SurfaceInteraction& si) {
   return std::get<AreaEmitter>(scene.emitters[scene.shapes[si.shape].emitter].model).radiance;
 }
 
-// Next-event estimation at si: one emitter chosen uniformly, MIS-weighted against BSDF sampling.
-Spectrum estimate_direct(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, const Vec3& wi_local,
-                         bool front, Pcg32& rng, PathCounters& counters) {
+}  // namespace
+
+DirectLightSample sample_direct_light(const Scene& scene, const SurfaceInteraction& si, const Bsdf& bsdf, const Vec3& wi_local,
+                                      bool front, Pcg32& rng, PathCounters& counters) {
+  DirectLightSample d;
   const size_t n = scene.emitters.size();
-  const size_t k = std::min(size_t(rng.next_float() * n), n - 1);
-  const Emitter& e = scene.emitters[k];
+  d.emitter = std::min(size_t(rng.next_float() * n), n - 1);
   const Vec2 u = rng.next_2d();
   const float u_extra = rng.next_float();
-  const EmitterSample es = sample_emitter(e, scene.shapes, si.p, u, u_extra);
-  if (!(es.pdf > 0.0f) || is_black(es.radiance)) return Spectrum(0.0f);
-  const Vec3 wo_local = si.frame.to_local(es.wi);
+  d.es = sample_emitter(scene.emitters[d.emitter], scene.shapes, si.p, u, u_extra);
+  if (!(d.es.pdf > 0.0f) || is_black(d.es.radiance)) return d;
+  d.wo_local = si.frame.to_local(d.es.wi);
   // Shading-normal light leaks: the geometric and shading hemispheres must agree.
-  if (glm::dot(es.wi, si.ng) * wo_local.z <= 0.0f) return Spectrum(0.0f);
-  const Spectrum f = bsdf.eval(wi_local, wo_local, si.uv, front);
-  if (is_black(f)) return Spectrum(0.0f);
-  const Ray shadow = es.to_infinity ? spawn_ray(si, es.wi) : spawn_ray_to(si, es.p);
+  if (glm::dot(d.es.wi, si.ng) * d.wo_local.z <= 0.0f) return d;
+  d.f = bsdf.eval(wi_local, d.wo_local, si.uv, front);
+  if (is_black(d.f)) return d;
   counters.rays++;
-  if (scene.occluded(shadow)) return Spectrum(0.0f);
-  const float pdf_light = es.pdf * scene.emitter_selection_pdf();
-  const float w = es.delta || !scene.integrator.bsdf_sampling ? 1.0f : mis_power(pdf_light, bsdf.pdf(wi_local, wo_local, si.uv, front));
-  return f * es.radiance * (w / pdf_light);
+  if (scene.occluded(d.es.to_infinity ? spawn_ray(si, d.es.wi) : spawn_ray_to(si, d.es.p))) return d;
+  d.pdf_light = d.es.pdf * scene.emitter_selection_pdf();
+  d.mis = d.es.delta || !scene.integrator.bsdf_sampling ? 1.0f : mis_power(d.pdf_light, bsdf.pdf(wi_local, d.wo_local, si.uv, front));
+  d.ok = true;
+  return d;
 }
 
-}  // namespace
+float russian_roulette(const Spectrum& beta, float eta_scale, Pcg32& rng) {
+  // On the throughput with the radiance scaling of refraction removed.
+  const float q = std::min(max_component(beta) * eta_scale, 0.95f);
+  return rng.next_float() < q ? q : 0.0f;
+}
 
 Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, PathCounters& counters, const PathLimits& limits) {
   const IntegratorSettings& cfg = scene.integrator;
@@ -83,8 +88,11 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     const Vec3 wi_local = si.frame.to_local(-ray.d);
     const bool front = glm::dot(ray.d, si.ng) < 0.0f;  // geometric side the ray arrives from
 
-    if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty())
-      L += beta * estimate_direct(scene, si, bsdf, wi_local, front, rng, counters);
+    // Next-event estimation.
+    if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty()) {
+      const DirectLightSample d = sample_direct_light(scene, si, bsdf, wi_local, front, rng, counters);
+      if (d.ok) L += beta * d.f * d.es.radiance * (d.mis / d.pdf_light);
+    }
     if (!cfg.bsdf_sampling) break;
 
     const float u_lobe = rng.next_float();
@@ -99,10 +107,9 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
     eta_scale *= bs->eta * bs->eta;
     ray = spawn_ray(si, wo);
 
-    // Russian roulette on the throughput with radiance scaling by refraction removed.
     if (depth + 1 >= cfg.rr_depth) {
-      const float q = std::min(max_component(beta) * eta_scale, 0.95f);
-      if (!(rng.next_float() < q)) break;
+      const float q = russian_roulette(beta, eta_scale, rng);
+      if (q == 0.0f) break;
       beta /= q;
     }
     if (is_black(beta)) break;
