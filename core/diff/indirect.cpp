@@ -15,14 +15,6 @@ using VV = ad::V3<Var>;
 // camera sub-paths are not traced (a truncation, said in docs/derivatives.md).
 constexpr int kImportanceBounces = 4;
 
-uint32_t opposite_vertex(const Mesh& m, int f, uint32_t a, uint32_t b) {
-  for (int k = 0; k < 3; ++k) {
-    const uint32_t v = m.indices[3 * f + k];
-    if (v != a && v != b) return v;
-  }
-  return a;
-}
-
 // f * W_conn of the camera connection at observing vertex si, for light arriving from direction
 // w_light (unit, pointing away from si): adds the pixel and value, returns false if none.
 bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const SurfaceInteraction& si, const Vec3& w_light,
@@ -50,32 +42,8 @@ bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const Sur
 
 }  // namespace
 
-IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
-  std::vector<float> lengths;
-  for (int si : params.moving_shapes()) {
-    const Shape& shape = scene.shapes[si];
-    if (!shape.is_mesh()) continue;  // spheres: their term is the curvature part of Eq. 4, not implemented yet
-    const Mesh& m = shape.mesh();
-    for (const MeshEdge& e : m.edges) {
-      const uint32_t a = e.a, b = e.b;
-      bool keep = e.face_count != 2;
-      if (!keep) {
-        // Convex and not flat: the third vertex of one face lies strictly below the other's plane
-        // (1e-6 of the edge length: below that the dihedral angle is numerically flat).
-        const Vec3d n0 = m.face_normal(e.face0);
-        const Vec3 c = m.vertex(opposite_vertex(m, e.face1, a, b));
-        const double h = glm::dot(n0, Vec3d(c - m.vertex(a)));
-        keep = h < -1e-6 * glm::length(Vec3d(m.vertex(b) - m.vertex(a)));
-      }
-      if (!keep) continue;
-      const float len = glm::length(m.vertex(b) - m.vertex(a));
-      if (!(len > 0.0f)) continue;
-      m_edges.push_back({si, a, b, e.face0, e.face_count == 2 ? e.face1 : -1});
-      lengths.push_back(len);
-      m_total_length += len;
-    }
-  }
-  if (!lengths.empty()) m_select = Distribution1D(lengths);
+IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params)
+    : m_scene(scene), m_params(params), m_space(scene, params) {
   for (size_t i = 0; i < scene.emitters.size(); ++i)
     if (scene.emitters[i].is_delta()) m_delta_lights.push_back(int(i));
 }
@@ -102,69 +70,28 @@ float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
 
 void IndirectBoundary::sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& in, std::vector<Splat>& splats,
                                  std::vector<Var>& velocities, uint64_t& rays, bool delta_terms) const {
-  // Boundary sample space: u.x picks the edge by length and the point on it, (u.y, u.z) the
-  // direction (uniform on the sphere). pdf_u is the guide's density on [0,1)^3, pdf_u0 that of u.x.
-  size_t k;
-  const float lambda = m_select.sample_remapped(u.x, &k);
-  const BoundaryEdge& e = m_edges[k];
-  const Mesh& m = m_scene.shapes[e.shape].mesh();
-  const Vec3 a = m.vertex(e.a), b = m.vertex(e.b);
-  const Vec3 xb = a + lambda * (b - a);
-  // x_b on the tape; the edge point is chosen per unit length: pdf = 1 / total length.
-  const VV va = diff_vertex(m_scene, m_params, in, e.shape, e.a), vb = diff_vertex(m_scene, m_params, in, e.shape, e.b);
-  const VV xb_var = va + (vb - va) * Var(lambda);
-  const float pdf_point = float(1.0 / m_total_length);
-
-  // Uniform directions for everything but the Dirac deltas of point and directional lights.
-  const Vec3 w = warp::square_to_uniform_sphere(Vec2(u.y, u.z));
+  // pdf_u is the guide's density on [0,1)^3, pdf_u0 that of u.x alone (the delta-light terms use u.x only).
   // Radiance probes and importance paths need independent random numbers (E[L_d W] is wanted, not
   // a product of correlated estimates): a stream of their own for the importance paths.
   const uint64_t seed = (uint64_t(rng.next_u32()) << 32) | rng.next_u32();
   const Pcg32 importance_rng(seed, 0x696d706f7274616eULL);
   const Pcg32 base = rng;
-  evaluate_direction(e, xb, w, pdf_u * pdf_point * warp::square_to_uniform_sphere_pdf(), false, -1, base, importance_rng, in,
-                     xb_var, splats, velocities, rays);
+  BoundaryPoint p;
+  if (m_space.sample(u, pdf_u, p)) evaluate(p, -1, base, importance_rng, in, splats, velocities, rays);
   if (!delta_terms) return;
-  for (int li : m_delta_lights) {
-    Vec3 wl;  // from the light through x_b, towards the observing side
-    if (const auto* p = std::get_if<PointEmitter>(&m_scene.emitters[li].model)) wl = xb - p->position;
-    else wl = std::get<DirectionalEmitter>(m_scene.emitters[li].model).direction;
-    if (!(glm::length(wl) > 0.0f)) continue;
-    evaluate_direction(e, xb, glm::normalize(wl), pdf_u0 * pdf_point, true, li, base, importance_rng, in, xb_var, splats,
-                       velocities, rays);
-  }
+  for (int li : m_delta_lights)
+    if (m_space.sample_delta(u.x, pdf_u0, m_scene.emitters[li], p)) evaluate(p, li, base, importance_rng, in, splats, velocities, rays);
 }
 
-void IndirectBoundary::evaluate_direction(const BoundaryEdge& e, const Vec3& xb, const Vec3& w, float pdf_w, bool delta_light,
-                                          int light, const Pcg32& rng0, const Pcg32& rng_importance, PathInputs& in, const VV& xb_var,
-                                          std::vector<Splat>& splats, std::vector<Var>& velocities, uint64_t& rays) const {
-  const Mesh& m = m_scene.shapes[e.shape].mesh();
-  const Vec3 t = glm::normalize(m.vertex(e.b) - m.vertex(e.a));
-  const Vec3 txw = glm::cross(t, w);
-  const float sin_phi = glm::length(txw);
-  if (!(sin_phi > 1e-6f)) return;  // w along the edge: the edge is invisible in that direction
-  const Vec3 n_b = txw / sin_phi;
-
-  // Only silhouettes for rays along w matter: one face towards w, the other away (or an open edge).
-  const Vec3d n0 = m.face_normal(e.face0);
-  Vec3 n_out;
-  if (e.face1 >= 0) {
-    const Vec3d n1 = m.face_normal(e.face1);
-    if ((glm::dot(n0, Vec3d(w)) > 0.0) == (glm::dot(n1, Vec3d(w)) > 0.0)) return;
-    n_out = Vec3(glm::normalize(n0 + n1));
-  } else {
-    n_out = Vec3(n0) * (glm::dot(n0, Vec3d(w)) >= 0.0 ? 1.0f : -1.0f);
-  }
-
-  // Probe offsets: 1e-4 of the edge length keeps the probes beside this edge only; the second
-  // term (~8 ulps of |x_b|) keeps them above float resolution.
-  const float edge_len = glm::length(m.vertex(e.b) - m.vertex(e.a));
-  const float delta = 1e-4f * edge_len + 1e-6f * max_component(glm::abs(xb));
-
+void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& rng0, const Pcg32& rng_importance, PathInputs& in,
+                                std::vector<Splat>& splats, std::vector<Var>& velocities, uint64_t& rays) const {
+  const bool delta_light = light >= 0;
+  const Vec3 &xb = p.xb, &w = p.w, &n_b = p.n_b;
+  const float delta = p.delta;
   // Importance: the observing surface along +w, connected to the camera.
   const int max_depth = m_scene.integrator.max_depth;
   if (max_depth >= 0 && max_depth < 2) return;  // camera -> observer -> edge needs two segments
-  Ray ray{xb + delta * n_out, w, 0.0f, kInfinity};
+  Ray ray{xb + delta * p.n_out, w, 0.0f, kInfinity};
   SurfaceInteraction y;
   rays++;
   if (!m_scene.intersect(ray, y)) return;
@@ -251,13 +178,13 @@ void IndirectBoundary::evaluate_direction(const BoundaryEdge& e, const Vec3& xb,
   };
 
   const int vi = int(velocities.size());
-  velocities.push_back(dot(xb_var, VV(Var(n_b.x), Var(n_b.y), Var(n_b.z))));
+  velocities.push_back(dot(m_space.attached_point(p, in), VV(Var(n_b.x), Var(n_b.y), Var(n_b.z))));
   for (const Connection& c : conns) {
     const int budget = max_depth < 0 ? -1 : max_depth - c.depth;
     if (max_depth >= 0 && budget < 1) continue;
     const Spectrum dL = radiance_difference(budget);
     if (is_black(dL)) continue;
-    const Spectrum value = dL * c.value * (sin_phi / pdf_w);
+    const Spectrum value = dL * c.value * (p.jacobian / p.pdf);
     if (is_finite(value)) splats.push_back({c.pixel, value, vi});
   }
 }

@@ -75,25 +75,21 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
     s.push_back("primary visibility: " + std::to_string(opt.spp_primary) + " samples per pixel over " +
                 std::to_string(primary->curve_count()) + " silhouette curves" +
                 (primary->skipped_edges() ? " (" + std::to_string(primary->skipped_edges()) + " edges crossing the near plane skipped)" : ""));
-  bool spheres = false;
-  for (int i : params.moving_shapes()) spheres |= !scene.shapes[i].is_mesh();
   if (opt.spp_boundary == 0)
     s.push_back("indirect boundary: switched off (spp_boundary = 0): derivatives of shadows and of silhouettes seen "
                 "in reflections are missing");
   else if (!indirect || indirect->empty())
-    s.push_back("indirect boundary: skipped, the differentiable meshes have no edge that can be a silhouette");
+    s.push_back("indirect boundary: skipped, the differentiable shapes have no edge that can be a silhouette");
   else
     s.push_back("indirect boundary: " + std::to_string(opt.spp_boundary) + " samples per pixel over " +
-                std::to_string(indirect->edge_count()) + " edges, " +
+                std::to_string(indirect->space().edge_count()) + " edges and " + std::to_string(indirect->space().sphere_count()) +
+                " sphere surfaces, " +
                 (terms && terms->grid ? "guiding grid " + std::to_string(opt.grid_resolution) + "x" + std::to_string(std::max(1, opt.grid_resolution / 4)) +
                                             "x" + std::to_string(std::max(1, opt.grid_resolution / 2)) + " (" + std::to_string(opt.guiding_spp) +
                                             " points per cell, " + std::to_string(terms->grid->empty_cells()) + " of " +
                                             std::to_string(terms->grid->cell_count()) + " cells empty, built in " +
                                             std::to_string(terms->grid_seconds) + " s, 10% uniform defensive mixture)"
                                       : std::string("guiding none (uniform)")));
-  if (spheres && opt.spp_boundary > 0)
-    s.push_back("indirect boundary of spheres: NOT COMPUTED (the curvature term of Eq. 4 is not implemented yet): "
-                "shadows and reflections of moving spheres are missing");
   return s;
 }
 

@@ -56,6 +56,11 @@ class Distribution1D {
     const double f = hi > lo ? (double(u) - lo) / (hi - lo) : 0.5;
     return float(std::clamp(f, 0.0, 1.0 - 1e-7));
   }
+  // Inverse of sample_remapped: the u that picks bin i with remapped offset f.
+  float invert_remapped(size_t i, float f) const {
+    const double u = m_cdf[i] + double(f) * (m_cdf[i + 1] - m_cdf[i]);
+    return std::min(float(u), std::nextafter(float(m_cdf[i + 1]), 0.0f));
+  }
   size_t sample_discrete(float u) const {
     // First i with cdf[i+1] > u, skipping empty bins.
     auto it = std::upper_bound(m_cdf.begin() + 1, m_cdf.end(), double(u));

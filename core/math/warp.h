@@ -28,6 +28,12 @@ inline Vec3 square_to_uniform_sphere(const Vec2& u) {
   return Vec3(r * std::cos(phi), r * std::sin(phi), z);
 }
 inline float square_to_uniform_sphere_pdf() { return kInvFourPi; }
+// Exact inverse of square_to_uniform_sphere for a unit vector.
+inline Vec2 uniform_sphere_to_square(const Vec3& w) {
+  float phi = std::atan2(w.y, w.x) * kInvTwoPi;
+  if (phi < 0.0f) phi += 1.0f;
+  return Vec2(std::min(phi, std::nextafter(1.0f, 0.0f)), std::clamp(0.5f * (1.0f - w.z), 0.0f, std::nextafter(1.0f, 0.0f)));
+}
 
 // Uniform on the upper (z >= 0) hemisphere; pdf (solid angle) = 1/(2 pi).
 inline Vec3 square_to_uniform_hemisphere(const Vec2& u) {

@@ -1,5 +1,5 @@
-"""Indirect boundary term (perimeter of mesh edges, projective-sampling paper Eq. 4), unguided:
-shadows of a moving occluder and its silhouette seen in a glossy reflection."""
+"""Indirect boundary term (projective-sampling paper Eq. 4: perimeter of mesh edges, curvature term of
+spheres): shadows of a moving occluder and its silhouette seen in a glossy reflection."""
 from __future__ import annotations
 
 import warnings
@@ -94,8 +94,10 @@ def test_silhouette_seen_in_a_glossy_reflection(emitter_reflectance):
 
 
 def test_backward_matches_forward_with_all_terms():
-    scene = limn.load_dict(shadow_scene(AREA))
-    names = ["box.vertex_positions", "box.reflectance"]
+    d = shadow_scene(AREA)
+    d["ball"] = {"type": "sphere", "center": [-0.5, 0.3, 0.9], "radius": 0.3}
+    scene = limn.load_dict(d)
+    names = ["box.vertex_positions", "box.reflectance", "ball.center", "ball.radius"]
     scene.set_differentiable(names)
     rng = np.random.default_rng(8)
     t = {n: rng.normal(size=scene.params[n].shape).astype(np.float32) for n in names}
@@ -107,13 +109,38 @@ def test_backward_matches_forward_with_all_terms():
     assert abs(lhs - rhs) <= 1e-3 * abs(rhs), (lhs, rhs)
 
 
-def test_spheres_say_what_is_missing():
-    d = shadow_scene(POINT)
-    d["ball"] = {"type": "sphere", "center": [-0.5, 0, 1], "radius": 0.3}
+def sphere_shadow_scene(light):
+    d = shadow_scene(light)
+    del d["box"]
+    d["ball"] = {"type": "sphere", "center": [0.4, 0.2, 1.2], "radius": 0.35,
+                 "bsdf": {"type": "diffuse", "reflectance": 0.4}}
+    return d
+
+
+@pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
+@pytest.mark.parametrize("name,t", [("ball.center", [1.0, 0.0, 0.0]), ("ball.radius", 1.0)], ids=["centre", "radius"])
+def test_moving_sphere_shadow(light, spp_boundary, name, t):
+    """Interior (curvature) part of Eq. 4: a sphere's shadow moves with its centre and grows with
+    its radius; with point lights through the light's silhouette circle on the sphere."""
+    scene = limn.load_dict(sphere_shadow_scene(light))
+    t = np.float32(t)
+    scene.set_differentiable([name])
+    z_on, z_off = compare(scene, name, t, spp_boundary)
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > 10, z_off
+    quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=spp_boundary)
+    assert any("1 sphere surfaces" in line for line in scene.last_stats["summary"]), scene.last_stats["summary"]
+
+
+def test_sphere_seen_in_a_glossy_reflection():
+    d = glossy_scene(0.0)
+    d["shape"] = {"type": "sphere", "center": [0.1, 1.0, 0.7], "radius": 0.3, "bsdf": {"type": "diffuse", "reflectance": 0.1}}
     scene = limn.load_dict(d)
-    scene.set_differentiable(["ball.center"])
-    with pytest.warns(UserWarning, match="indirect boundary of spheres: NOT COMPUTED"):
-        scene.render_forward({"ball.center": np.float32([1, 0, 0])}, spp=4)
+    name = "shape.center"
+    scene.set_differentiable([name])
+    z_on, z_off = compare(scene, name, np.float32([1, 0, 0]), 512)
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > 6, z_off
 
 
 def test_grid_guiding_agrees_and_lowers_the_error():

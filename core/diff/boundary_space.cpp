@@ -1,0 +1,191 @@
+#include "core/diff/boundary_space.h"
+
+#include "core/math/frame.h"
+#include "core/math/warp.h"
+
+namespace limn {
+namespace {
+
+uint32_t opposite_vertex(const Mesh& m, int f, uint32_t a, uint32_t b) {
+  for (int k = 0; k < 3; ++k) {
+    const uint32_t v = m.indices[3 * f + k];
+    if (v != a && v != b) return v;
+  }
+  return a;
+}
+
+// Probe offset: a fraction of the local feature size keeps the probes beside this boundary only;
+// the second term (~8 ulps of |x_b|) keeps them above float resolution.
+float probe_offset(float feature_size, const Vec3& xb) { return 1e-4f * feature_size + 1e-6f * max_component(glm::abs(xb)); }
+
+float wrap_unit(float x) {
+  x -= std::floor(x);
+  return std::min(x, std::nextafter(1.0f, 0.0f));
+}
+
+}  // namespace
+
+bool edge_can_be_silhouette(const Mesh& m, const MeshEdge& e) {
+  if (e.face_count != 2) return true;
+  // Convex and not flat: the third vertex of one face lies strictly below the other's plane (1e-6 of
+  // the edge length: below that the dihedral angle is numerically flat).
+  const Vec3d n0 = m.face_normal(e.face0);
+  const Vec3 c = m.vertex(opposite_vertex(m, e.face1, e.a, e.b));
+  const double h = glm::dot(n0, Vec3d(c - m.vertex(e.a)));
+  return h < -1e-6 * glm::length(Vec3d(m.vertex(e.b) - m.vertex(e.a)));
+}
+
+BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
+  for (int si : params.moving_shapes()) {
+    const Shape& shape = scene.shapes[si];
+    if (!shape.is_mesh()) continue;
+    const Mesh& m = shape.mesh();
+    for (const MeshEdge& e : m.edges) {
+      if (!edge_can_be_silhouette(m, e)) continue;
+      const float len = glm::length(m.vertex(e.b) - m.vertex(e.a));
+      if (!(len > 0.0f)) continue;
+      m_segments.push_back({BoundarySegment::Kind::MeshEdge, si, e.a, e.b, e.face0, e.face_count == 2 ? e.face1 : -1});
+      m_measure.push_back(4.0f * kPi * len);
+    }
+  }
+  m_edges = m_segments.size();
+  for (int si : params.moving_shapes()) {
+    const Shape& shape = scene.shapes[si];
+    if (shape.is_mesh()) continue;
+    m_segments.push_back({BoundarySegment::Kind::SphereSurface, si});
+    m_measure.push_back(8.0f * kPi * kPi * shape.sphere().radius);
+  }
+  if (!m_measure.empty()) m_select = Distribution1D(m_measure);
+}
+
+bool BoundarySpace::finish_edge(const BoundarySegment& s, float lambda, const Vec3& w, BoundaryPoint& out) const {
+  const Mesh& m = m_scene.shapes[s.shape].mesh();
+  const Vec3 a = m.vertex(s.a), b = m.vertex(s.b);
+  const float len = glm::length(b - a);
+  const Vec3 t = (b - a) / len;
+  const Vec3 txw = glm::cross(t, w);
+  const float sin_phi = glm::length(txw);
+  if (!(sin_phi > 1e-6f)) return false;  // w along the edge: the edge is invisible in that direction
+  // A silhouette for rays along w: one face towards w, the other away (or an open edge).
+  const Vec3d n0 = m.face_normal(s.face0);
+  if (s.face1 >= 0) {
+    const Vec3d n1 = m.face_normal(s.face1);
+    if ((glm::dot(n0, Vec3d(w)) > 0.0) == (glm::dot(n1, Vec3d(w)) > 0.0)) return false;
+    out.n_out = Vec3(glm::normalize(n0 + n1));
+  } else {
+    out.n_out = Vec3(n0) * (glm::dot(n0, Vec3d(w)) >= 0.0 ? 1.0f : -1.0f);
+  }
+  out.xb = a + lambda * (b - a);
+  out.w = w;
+  out.n_b = txw / sin_phi;
+  out.jacobian = sin_phi;
+  out.delta = probe_offset(len, out.xb);
+  out.param = Vec3(lambda, 0.0f, 0.0f);
+  return true;
+}
+
+void BoundarySpace::finish_sphere(const BoundarySegment& s, const Vec3& n, const Vec3& w, BoundaryPoint& out) const {
+  const Sphere& sp = m_scene.shapes[s.shape].sphere();
+  out.xb = sp.center + sp.radius * n;
+  out.w = w;
+  out.n_b = n;  // growing along n covers the background with the sphere
+  out.n_out = n;
+  out.jacobian = 1.0f / sp.radius;  // normal curvature, the same in every direction
+  out.delta = probe_offset(sp.radius, out.xb);
+  out.param = n;
+}
+
+bool BoundarySpace::sample(const Vec3& u, float pdf_u, BoundaryPoint& out) const {
+  size_t k;
+  const float f = m_select.sample_remapped(u.x, &k);
+  const BoundarySegment& s = m_segments[k];
+  out.segment = int(k);
+  if (s.kind == BoundarySegment::Kind::MeshEdge) {
+    const Vec3 w = warp::square_to_uniform_sphere(Vec2(u.y, u.z));
+    if (!finish_edge(s, f, w, out)) return false;
+    const Mesh& m = m_scene.shapes[s.shape].mesh();
+    const float len = glm::length(m.vertex(s.b) - m.vertex(s.a));
+    out.pdf = pdf_u * m_select.pmf(k) / len * warp::square_to_uniform_sphere_pdf();
+    return true;
+  }
+  const Sphere& sp = m_scene.shapes[s.shape].sphere();
+  const Vec3 n = warp::square_to_uniform_sphere(Vec2(f, u.y));
+  const Frame frame(n);
+  const float phi = 2.0f * kPi * u.z;
+  finish_sphere(s, n, std::cos(phi) * frame.s + std::sin(phi) * frame.t, out);
+  out.pdf = pdf_u * m_select.pmf(k) / sp.area() * kInvTwoPi;
+  return true;
+}
+
+Vec3 BoundarySpace::invert(int segment, const Vec3& xb, const Vec3& w) const {
+  const BoundarySegment& s = m_segments[size_t(segment)];
+  if (s.kind == BoundarySegment::Kind::MeshEdge) {
+    const Mesh& m = m_scene.shapes[s.shape].mesh();
+    const Vec3 a = m.vertex(s.a), ab = m.vertex(s.b) - a;
+    const float lambda = std::clamp(glm::dot(xb - a, ab) / glm::dot(ab, ab), 0.0f, std::nextafter(1.0f, 0.0f));
+    const Vec2 d = warp::uniform_sphere_to_square(w);
+    return Vec3(m_select.invert_remapped(size_t(segment), lambda), d.x, d.y);
+  }
+  const Sphere& sp = m_scene.shapes[s.shape].sphere();
+  const Vec3 n = glm::normalize(xb - sp.center);
+  const Vec2 q = warp::uniform_sphere_to_square(n);
+  const Frame frame(n);
+  const float phi = std::atan2(glm::dot(w, frame.t), glm::dot(w, frame.s));
+  return Vec3(m_select.invert_remapped(size_t(segment), q.x), q.y, wrap_unit(phi * kInvTwoPi));
+}
+
+bool BoundarySpace::sample_delta(float u0, float pdf_u0, const Emitter& light, BoundaryPoint& out) const {
+  size_t k;
+  const float f = m_select.sample_remapped(u0, &k);
+  const BoundarySegment& s = m_segments[k];
+  out.segment = int(k);
+  const auto* point = std::get_if<PointEmitter>(&light.model);
+  const auto* directional = std::get_if<DirectionalEmitter>(&light.model);
+  if (!point && !directional) return false;
+  if (s.kind == BoundarySegment::Kind::MeshEdge) {
+    const Mesh& m = m_scene.shapes[s.shape].mesh();
+    const Vec3 a = m.vertex(s.a), b = m.vertex(s.b);
+    const Vec3 xb = a + f * (b - a);
+    const Vec3 wl = point ? xb - point->position : directional->direction;
+    if (!(glm::length(wl) > 0.0f) || !finish_edge(s, f, glm::normalize(wl), out)) return false;
+    out.pdf = pdf_u0 * m_select.pmf(k) / glm::length(b - a);
+    return true;
+  }
+  // The sphere's silhouette circle seen from the light: normals n with n . a_hat = cos(alpha),
+  // a_hat towards the light, cos(alpha) = r / (distance to the light) (0 for directional lights).
+  const Sphere& sp = m_scene.shapes[s.shape].sphere();
+  Vec3 a_hat;
+  float cos_alpha = 0.0f;
+  if (point) {
+    const Vec3 a = point->position - sp.center;
+    const float dist = glm::length(a);
+    if (!(dist > sp.radius * (1.0f + 1e-4f))) return false;  // the light is (almost) inside the sphere
+    a_hat = a / dist;
+    cos_alpha = sp.radius / dist;
+  } else {
+    a_hat = -directional->direction;
+  }
+  const float sin_alpha = safe_sqrt(1.0f - cos_alpha * cos_alpha);
+  const Frame frame(a_hat);
+  const float psi = 2.0f * kPi * f;
+  const Vec3 n = glm::normalize(cos_alpha * a_hat + sin_alpha * (std::cos(psi) * frame.s + std::sin(psi) * frame.t));
+  const Vec3 xb = sp.center + sp.radius * n;
+  const Vec3 w = point ? glm::normalize(xb - point->position) : directional->direction;
+  finish_sphere(s, n, w, out);
+  out.jacobian = 1.0f;  // the circle's tangent is perpendicular to w: sin(phi) = 1
+  out.pdf = pdf_u0 * m_select.pmf(k) / (2.0f * kPi * sp.radius * sin_alpha);
+  return out.pdf > 0.0f && std::isfinite(out.pdf);
+}
+
+ad::V3<ad::Var> BoundarySpace::attached_point(const BoundaryPoint& p, PathInputs& in) const {
+  const BoundarySegment& s = m_segments[size_t(p.segment)];
+  if (s.kind == BoundarySegment::Kind::MeshEdge) {
+    const ad::V3<ad::Var> va = diff_vertex(m_scene, m_params, in, s.shape, s.a), vb = diff_vertex(m_scene, m_params, in, s.shape, s.b);
+    return va + (vb - va) * ad::Var(p.param.x);
+  }
+  const ad::V3<ad::Var> c = diff_sphere_center(m_scene, m_params, in, s.shape);
+  const ad::Var r = diff_sphere_radius(m_scene, m_params, in, s.shape);
+  return c + ad::V3<ad::Var>(ad::Var(p.param.x), ad::Var(p.param.y), ad::Var(p.param.z)) * r;
+}
+
+}  // namespace limn
