@@ -36,26 +36,50 @@ bool edge_can_be_silhouette(const Mesh& m, const MeshEdge& e) {
 }
 
 BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
-  for (int si : params.moving_shapes()) {
-    const Shape& shape = scene.shapes[si];
-    if (!shape.is_mesh()) continue;
-    const Mesh& m = shape.mesh();
-    for (const MeshEdge& e : m.edges) {
-      if (!edge_can_be_silhouette(m, e)) continue;
-      const float len = glm::length(m.vertex(e.b) - m.vertex(e.a));
-      if (!(len > 0.0f)) continue;
-      m_segments.push_back({BoundarySegment::Kind::MeshEdge, si, e.a, e.b, e.face0, e.face_count == 2 ? e.face1 : -1});
-      m_measure.push_back(4.0f * kPi * len);
+  // Moving shapes first, then static ones: a static silhouette matters too when a segment grazing
+  // it ends on a moving surface (a receiver moving under a static occluder).
+  std::vector<int> order = params.moving_shapes();
+  const size_t moving_count = order.size();
+  for (size_t i = 0; i < scene.shapes.size(); ++i)
+    if (!moves_geometry(params, int(i))) order.push_back(int(i));
+  double moving_measure = 0.0, static_measure = 0.0;
+  for (int pass = 0; pass < 2; ++pass)  // meshes, then spheres
+    for (size_t oi = 0; oi < order.size(); ++oi) {
+      const int si = order[oi];
+      const Shape& shape = scene.shapes[si];
+      const bool moving = oi < moving_count;
+      if (pass == 0 && shape.is_mesh()) {
+        const Mesh& m = shape.mesh();
+        for (const MeshEdge& e : m.edges) {
+          if (!edge_can_be_silhouette(m, e)) continue;
+          const float len = glm::length(m.vertex(e.b) - m.vertex(e.a));
+          if (!(len > 0.0f)) continue;
+          m_segments.push_back({BoundarySegment::Kind::MeshEdge, si, moving, e.a, e.b, e.face0, e.face_count == 2 ? e.face1 : -1});
+          m_measure.push_back(4.0f * kPi * len);
+          (moving ? moving_measure : static_measure) += m_measure.back();
+        }
+      } else if (pass == 1 && !shape.is_mesh()) {
+        m_segments.push_back({BoundarySegment::Kind::SphereSurface, si, moving});
+        m_measure.push_back(8.0f * kPi * kPi * shape.sphere().radius);
+        (moving ? moving_measure : static_measure) += m_measure.back();
+      }
     }
-  }
-  m_edges = m_segments.size();
-  for (int si : params.moving_shapes()) {
-    const Shape& shape = scene.shapes[si];
-    if (shape.is_mesh()) continue;
-    m_segments.push_back({BoundarySegment::Kind::SphereSurface, si});
-    m_measure.push_back(8.0f * kPi * kPi * shape.sphere().radius);
+  m_edges = 0;
+  for (const BoundarySegment& seg : m_segments) m_edges += seg.kind == BoundarySegment::Kind::MeshEdge;
+  // Static segments get at most a quarter of the samples: they contribute only where a moving
+  // surface ends the segment, moving ones wherever they are seen.
+  if (moving_measure > 0.0 && static_measure > 0.0) {
+    const double scale = std::min(1.0, (0.25 / 0.75) * moving_measure / static_measure);
+    for (size_t i = 0; i < m_segments.size(); ++i)
+      if (!m_segments[i].moving) m_measure[i] = float(m_measure[i] * scale);
   }
   if (!m_measure.empty()) m_select = Distribution1D(m_measure);
+}
+
+size_t BoundarySpace::static_count() const {
+  size_t n = 0;
+  for (const BoundarySegment& seg : m_segments) n += !seg.moving;
+  return n;
 }
 
 bool BoundarySpace::finish_edge(const BoundarySegment& s, float lambda, const Vec3& w, BoundaryPoint& out) const {
@@ -77,7 +101,12 @@ bool BoundarySpace::finish_edge(const BoundarySegment& s, float lambda, const Ve
   }
   out.xb = a + lambda * (b - a);
   out.w = w;
+  // Orient n_b away from the occluder: seen along w, the faces lie on the side of their third
+  // vertex (n_b is perpendicular to w and to the edge, so n_b . (c - a) is that side).
   out.n_b = txw / sin_phi;
+  const float side = glm::dot(out.n_b, m.vertex(opposite_vertex(m, s.face0, s.a, s.b)) - a);
+  if (side == 0.0f) return false;
+  if (side > 0.0f) out.n_b = -out.n_b;
   out.jacobian = sin_phi;
   out.delta = probe_offset(len, out.xb);
   out.param = Vec3(lambda, 0.0f, 0.0f);

@@ -7,6 +7,8 @@
 //   - sphere surfaces (interior part of Eq. 4, normal curvature 1/r): (remapped u.x, u.y) is the
 //     point on the sphere, u.z the tangential direction angle; measure dA dphi, weight 8 pi^2 r
 //     (area x 2 pi x curvature).
+// Static shapes take part too (a segment grazing a static silhouette moves when it ends on a moving
+// surface); together they get at most a quarter of the first coordinate.
 // Point and directional lights put Dirac deltas into the integrand; sample_delta() maps u.x alone
 // onto the curve where the light's direction grazes the boundary (any point of an edge; the
 // sphere's silhouette circle seen from the light), measure dl.
@@ -23,6 +25,7 @@ namespace limn {
 struct BoundarySegment {
   enum class Kind { MeshEdge, SphereSurface } kind;
   int shape;
+  bool moving;                 // the shape's geometry is differentiable
   uint32_t a = 0, b = 0;       // edge vertices
   int face0 = -1, face1 = -1;  // adjacent triangles (face1 = -1 on a boundary edge)
 };
@@ -31,7 +34,7 @@ struct BoundaryPoint {
   int segment = -1;
   Vec3 xb{0.0f};     // point on the boundary
   Vec3 w{0.0f};      // unit direction from x_b towards the observing side
-  Vec3 n_b{0.0f};    // unit normal of the boundary curve's motion: the occluder lies on its -n_b side
+  Vec3 n_b{0.0f};    // unit normal of the boundary, perpendicular to w, pointing away from the occluder
   Vec3 n_out{0.0f};  // offset that moves a ray start off the surface (importance rays)
   float jacobian = 0.0f;  // sin(phi) between edge and w (perimeter), or the normal curvature (interior)
   float pdf = 0.0f;       // density per unit measure (dl dw, dA dphi, or dl for delta lights)
@@ -46,6 +49,7 @@ class BoundarySpace {
   bool empty() const { return m_segments.empty(); }
   size_t edge_count() const { return m_edges; }
   size_t sphere_count() const { return m_segments.size() - m_edges; }
+  size_t static_count() const;  // segments of shapes that do not move
   const std::vector<BoundarySegment>& segments() const { return m_segments; }
 
   // The point for u, drawn with density pdf_u on [0,1)^3. False where the integrand is zero by
@@ -68,7 +72,7 @@ class BoundarySpace {
 
   const Scene& m_scene;
   const DiffParams& m_params;
-  std::vector<BoundarySegment> m_segments;  // edges first, then spheres
+  std::vector<BoundarySegment> m_segments;  // edges first (moving shapes first), then spheres
   std::vector<float> m_measure;             // per segment: its weight (see above)
   size_t m_edges = 0;
   Distribution1D m_select;

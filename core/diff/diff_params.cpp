@@ -56,6 +56,18 @@ ad::Var diff_sphere_radius(const Scene& scene, const DiffParams& params, PathInp
   return in.make(scene.shapes[shape].sphere().radius, params.slot(Parameter::Kind::SphereRadius, shape));
 }
 
+ad::V3<ad::Var> diff_surface_point(const Scene& scene, const DiffParams& params, PathInputs& in, const SurfaceInteraction& si) {
+  const Shape& sh = scene.shapes[si.shape];
+  if (!sh.is_mesh()) {
+    const ad::V3<ad::Var> n(ad::Var(si.ng.x), ad::Var(si.ng.y), ad::Var(si.ng.z));
+    return diff_sphere_center(scene, params, in, si.shape) + n * diff_sphere_radius(scene, params, in, si.shape);
+  }
+  const uint32_t* idx = &sh.mesh().indices[3 * size_t(si.prim)];
+  const ad::Var b1(si.bary.x), b2(si.bary.y);
+  return diff_vertex(scene, params, in, si.shape, idx[0]) * (ad::Var(1.0) - b1 - b2) +
+         diff_vertex(scene, params, in, si.shape, idx[1]) * b1 + diff_vertex(scene, params, in, si.shape, idx[2]) * b2;
+}
+
 bool moves_geometry(const DiffParams& params, int shape) {
   for (Parameter::Kind k : {Parameter::Kind::VertexPositions, Parameter::Kind::SphereCenter, Parameter::Kind::SphereRadius,
                             Parameter::Kind::Translation})

@@ -65,6 +65,9 @@ struct PathInputs {
 ad::V3<ad::Var> diff_vertex(const Scene& scene, const DiffParams& params, PathInputs& in, int shape, uint32_t i);
 ad::V3<ad::Var> diff_sphere_center(const Scene& scene, const DiffParams& params, PathInputs& in, int shape);
 ad::Var diff_sphere_radius(const Scene& scene, const DiffParams& params, PathInputs& in, int shape);
+// The material point of a surface hit, attached to its shape (fixed barycentrics on a triangle,
+// fixed direction from a sphere's centre): it moves with the differentiable geometry.
+ad::V3<ad::Var> diff_surface_point(const Scene& scene, const DiffParams& params, PathInputs& in, const SurfaceInteraction& si);
 // Whether any parameter moves the geometry of `shape`.
 bool moves_geometry(const DiffParams& params, int shape);
 

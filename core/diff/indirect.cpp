@@ -137,49 +137,86 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
   }
   if (conns.empty()) return;
 
-  // L_d = L(x_b - delta n_b) - L(x_b + delta n_b) for light travelling along +w, per path budget.
+  // L_d: the jump of the path integrand across the boundary. The interior term attaches every
+  // vertex after the camera ray to its surface (material form), so the occluder's own radiance is
+  // already in it (its surface, not a direction range, is the integration domain) and the only
+  // jump is the visibility of the segment from the observer to x_c past the boundary: blocked on
+  // the occluder's side, L_bg on the other. L_d = 0 - L_bg, per path budget. (The primary term
+  // differs: camera rays keep their direction, so there L_d = L_fg - L_bg.)
   std::map<int, Spectrum> delta_L;  // by remaining depth
+  const Vec3 probe = xb + delta * n_b;  // beside the occluder, on its background side
   auto radiance_difference = [&](int budget) {
     auto it = delta_L.find(budget);
     if (it != delta_L.end()) return it->second;
-    Spectrum L[2];
-    for (int side = 0; side < 2; ++side) {
-      const Vec3 probe = xb + (side == 0 ? -delta : delta) * n_b;
-      if (delta_light) {
-        // The light's delta along w reaches the probe unless something blocks it.
-        const Emitter& em = m_scene.emitters[light];
-        Ray shadow;
-        Spectrum value;
-        if (const auto* p = std::get_if<PointEmitter>(&em.model)) {
-          const Vec3 d = p->position - probe;
-          const float dist = glm::length(d);
-          shadow = Ray{probe, d / dist, 0.0f, dist * (1.0f - 1e-4f)};
-          value = p->intensity / (dist * dist);
-        } else {
-          shadow = Ray{probe, -w, 0.0f, kInfinity};
-          value = std::get<DirectionalEmitter>(em.model).irradiance;
-        }
-        rays++;
-        L[side] = m_scene.occluded(shadow) ? Spectrum(0.0f) : value;
+    Spectrum L_bg(0.0f);
+    if (delta_light) {
+      // The light's delta along w reaches the probe unless something blocks it.
+      const Emitter& em = m_scene.emitters[light];
+      Ray shadow;
+      Spectrum value;
+      if (const auto* pl = std::get_if<PointEmitter>(&em.model)) {
+        const Vec3 d = pl->position - probe;
+        const float dist = glm::length(d);
+        shadow = Ray{probe, d / dist, 0.0f, dist * (1.0f - 1e-4f)};
+        value = pl->intensity / (dist * dist);
       } else {
-        // From beside x_b, half way towards the observer, along -w: the segment to the observer is
-        // empty, and starting that far out the occluder-side probe cannot begin inside the occluder
-        // (a start close to x_b does for faces nearly parallel to w).
-        const float back = 0.5f * dist_y;
-        Pcg32 r = rng0;
-        PathCounters counters;
-        L[side] = path_radiance(m_scene, Ray{probe + back * w, -w, 0.0f, kInfinity}, r, counters, PathLimits{budget, false});
-        rays += counters.rays;
+        shadow = Ray{probe, -w, 0.0f, kInfinity};
+        value = std::get<DirectionalEmitter>(em.model).irradiance;
       }
+      rays++;
+      if (!m_scene.occluded(shadow)) L_bg = value;
+    } else {
+      // From half way towards the observer, along -w: the segment to the observer is empty.
+      const float back = 0.5f * dist_y;
+      Pcg32 r = rng0;
+      PathCounters counters;
+      L_bg = path_radiance(m_scene, Ray{probe + back * w, -w, 0.0f, kInfinity}, r, counters, PathLimits{budget, false});
+      rays += counters.rays;
     }
-    const Spectrum d = L[0] - L[1];
-    delta_L[budget] = d;
-    return d;
+    delta_L[budget] = -L_bg;
+    return -L_bg;
   };
 
-  const int vi = int(velocities.size());
-  velocities.push_back(dot(m_space.attached_point(p, in), VV(Var(n_b.x), Var(n_b.y), Var(n_b.z))));
+  // Normal velocity of the boundary relative to the segment (y, x_c) that grazes it. The interior
+  // term moves both ends with their surfaces (y slides along the camera ray when the camera sees
+  // it directly, and is attached to its surface when reached by a BSDF sample; x_c is attached), so
+  // the boundary moves by v_b - (1 - s) v_y - s v_c along n_b, s = |x_b - y| / |x_c - y| (Zhang et
+  // al. 2020's relative velocity; s = 0 when x_c is at infinity). Moving occluders, receivers and
+  // self-shadowing shapes all go through this one expression.
+  const VV nb(Var(n_b.x), Var(n_b.y), Var(n_b.z));
+  const Var v_b = dot(m_space.attached_point(p, in), nb);
+  float s = 0.0f;
+  Var v_c(0.0);
+  if (delta_light) {
+    if (const auto* pl = std::get_if<PointEmitter>(&m_scene.emitters[light].model))
+      s = dist_y / (dist_y + glm::length(pl->position - xb));
+  } else {
+    const float back = 0.5f * dist_y;
+    SurfaceInteraction xc;
+    rays++;
+    if (m_scene.intersect(Ray{probe + back * w, -w, 0.0f, kInfinity}, xc)) {
+      s = dist_y / (dist_y + std::max(xc.t - back, 0.0f));
+      if (moves_geometry(m_params, xc.shape)) v_c = dot(diff_surface_point(m_scene, m_params, in, xc), nb);
+    }
+  }
+  const Var v_ends = v_b - Var(s) * v_c;
+  int vi_slide = -1, vi_attached = -1;
+  if (!moves_geometry(m_params, y.shape)) {
+    vi_slide = vi_attached = int(velocities.size());
+    velocities.push_back(v_ends);
+  } else {
+    const VV y_att = diff_surface_point(m_scene, m_params, in, y);
+    vi_attached = int(velocities.size());
+    velocities.push_back(v_ends - Var(1.0f - s) * dot(y_att, nb));
+    // Sliding along the camera ray d: y moves by d (u . n_y) / (d . n_y) for a surface velocity u.
+    const Vec3 d = glm::normalize(y.p - m_scene.camera.world_from_camera.point(Vec3(0.0f)));
+    const float dn = glm::dot(d, y.ng);
+    vi_slide = int(velocities.size());
+    velocities.push_back(v_ends - Var((1.0f - s) * glm::dot(d, n_b) / dn) * dot(y_att, VV(Var(y.ng.x), Var(y.ng.y), Var(y.ng.z))));
+  }
   for (const Connection& c : conns) {
+    const int vi = c.depth == 1 ? vi_slide : vi_attached;
+    if (velocities[size_t(vi)].is_constant()) continue;  // nothing at either end of the segment moves
     const int budget = max_depth < 0 ? -1 : max_depth - c.depth;
     if (max_depth >= 0 && budget < 1) continue;
     const Spectrum dL = radiance_difference(budget);

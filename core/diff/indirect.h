@@ -3,20 +3,22 @@
 //                L_d(x_b, w) W(x_b, w) sin(phi) (d x_b/d theta . n_b) dw dl(x_b),
 //     interior:  integral over sphere surfaces, integral over the tangent directions of
 //                L_d(x_b, w) W(x_b, w) kappa (d x_b/d theta . n_b) dphi dA(x_b),
-// where w points from x_b towards the observing side, L_d is the radiance on the occluder's side
-// of the boundary minus the radiance passing beside it (both path traced, with the same random
-// numbers, along -w from just beside x_b), W is the importance of the ray, traced along +w to the
-// observing surface and connected to the camera there and at further BSDF-sampled vertices.
-// For edges sin(phi) = |t x w| and n_b = (t x w) / |t x w|; for spheres kappa = 1/r and n_b is
-// the surface normal.
+// where w points from x_b towards the observing side y, and L_d = -L_bg is the jump of the path
+// integrand in the material form of the interior term (docs/derivatives.md): the radiance arriving
+// along -w from beside x_b on the background side (path traced), lost when the segment from y to
+// the background point x_c is blocked. W is the importance of the ray, traced along +w to y and
+// connected to the camera there and at further BSDF-sampled vertices. The velocity is relative to
+// the segment (y, x_c), whose ends move with their surfaces.
+// For edges sin(phi) = |t x w| and n_b = +-(t x w) / |t x w| away from the occluder; for spheres
+// kappa = 1/r and n_b is the surface normal.
 //
 // Sampling: core/diff/boundary_space.h maps [0,1)^3 onto (segment, x_b, w); "guiding: none"
 // samples it uniformly, "grid" with core/guiding/grid.h. Point and directional lights put a Dirac
 // delta into L_d: for each of them the light's own direction through a point of the same segment
 // is evaluated as a term of its own (shadow edges and sphere shadow outlines of delta lights).
 //
-// Not covered: creases of flat-shaded meshes seen indirectly, and camera connections through
-// delta BSDFs (docs/derivatives.md).
+// Creases of flat-shaded meshes need no term here: in the material form they stay where they are.
+// Not covered: camera connections through delta BSDFs (docs/derivatives.md).
 #pragma once
 #include "core/diff/boundary_space.h"
 #include "core/math/rng.h"

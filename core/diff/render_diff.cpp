@@ -83,7 +83,8 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
   else
     s.push_back("indirect boundary: " + std::to_string(opt.spp_boundary) + " samples per pixel over " +
                 std::to_string(indirect->space().edge_count()) + " edges and " + std::to_string(indirect->space().sphere_count()) +
-                " sphere surfaces, " +
+                " sphere surfaces (" + std::to_string(indirect->space().static_count()) +
+                " of them static: they count where a moving surface ends the segment), " +
                 (terms && terms->grid ? "guiding grid " + std::to_string(opt.grid_resolution) + "x" + std::to_string(std::max(1, opt.grid_resolution / 4)) +
                                             "x" + std::to_string(std::max(1, opt.grid_resolution / 2)) + " (" + std::to_string(opt.guiding_spp) +
                                             " points per cell, " + std::to_string(terms->grid->empty_cells()) + " of " +
