@@ -38,11 +38,21 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from . import demo
     import warnings
+    if args.which == "shadows":
+        from . import shadow_demo
+        if args.report:
+            md = shadow_demo.report(args.report, seeds=args.seeds, iterations=args.iterations or 150,
+                                    argv="python3 -m limn " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["demo"] else "")
+            print(f"wrote {os.path.abspath(md)}")
+            return 0
+        summary = shadow_demo.run(out=args.output or "out/shadows", iterations=args.iterations or 150, spp=args.spp,
+                                  guiding=args.guiding)
+        return 0 if summary["final_chamfer"] < summary["initial_chamfer"] else 1
+    from . import demo
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the summary lines about the sphere-free scene are not news here
-        summary = demo.run(out=args.output, iterations=args.iterations, spp=args.spp)
+        summary = demo.run(out=args.output or "out/demo", iterations=args.iterations or 80, spp=args.spp)
     return 0 if summary["final_loss"] < summary["initial_loss"] else 1
 
 
@@ -65,10 +75,18 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--threads", type=int, default=0, help="worker threads (0: all cores)")
     r.add_argument("--no-preview", action="store_true", help="do not write a .png next to an .exr/.hdr output")
     r.set_defaults(func=cmd_render)
-    d = sub.add_parser("demo", help="inverse shape optimisation demo: recover a bumpy shape from three images")
-    d.add_argument("-o", "--output", default="out/demo", help="folder for the result (PLY, renders, history.json)")
-    d.add_argument("--iterations", type=int, default=80)
+    d = sub.add_parser("demo", help="inverse shape optimisation demos with a known ground truth")
+    d.add_argument("which", nargs="?", default="multiview", choices=["multiview", "shadows"],
+                   help="multiview: a bumpy shape from three images (default); shadows: a shape from its two "
+                        "shadows on a curved wall (scenes/shadow_wall)")
+    d.add_argument("-o", "--output", default=None, help="folder for the result (PLY, renders, history.json); "
+                                                        "default out/demo or out/shadows")
+    d.add_argument("--iterations", type=int, default=None, help="default 80 (multiview) or 150 (shadows)")
     d.add_argument("--spp", type=int, default=8)
+    d.add_argument("--guiding", default="none", choices=["none", "grid"], help="shadows: boundary guiding")
+    d.add_argument("--report", default=None, metavar="DIR",
+                   help="shadows: run shadow term on/off and both guiding modes over several seeds, write DIR/shadow_reconstruction.md")
+    d.add_argument("--seeds", type=int, default=3, help="with --report")
     d.set_defaults(func=cmd_demo)
     b = sub.add_parser("bench", help="gradient error against run time, against a finite-difference reference")
     b.add_argument("scene")

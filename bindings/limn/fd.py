@@ -14,12 +14,12 @@ def default_cache_dir() -> str:
 
 
 def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache: bool | str = True,
-       threads: int = 0) -> np.ndarray:
+       threads: int = 0, max_depth: int | None = None) -> np.ndarray:
     """(I(theta + eps t) - I(theta - eps t)) / (2 eps) from two primal renders with the same random
     numbers. ``tangents`` maps parameter names to arrays shaped like the parameters. The parameters
     are restored afterwards. Results are cached on disk (``cache``: True for the default folder,
     $LIMN_FD_CACHE or ~/.cache/limn/fd; a path; or False), keyed by the scene's source, every
-    parameter value, the tangents and the settings."""
+    parameter value, the tangents and the settings. ``max_depth`` as in :meth:`Scene.render`."""
     if not eps > 0:
         raise ValueError(f"eps must be > 0 (got {eps})")
     base = {}
@@ -39,7 +39,7 @@ def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache:
         for name in sorted(base):
             digest.update(b"tangent:" + name.encode())
             digest.update(base[name][1].tobytes())
-        digest.update(repr((float(eps), int(spp), int(seed), scene.width, scene.height)).encode())
+        digest.update(repr((float(eps), int(spp), int(seed), scene.width, scene.height, max_depth)).encode())
         folder = cache if isinstance(cache, str) else default_cache_dir()
         path = os.path.join(folder, digest.hexdigest()[:32] + ".npy")
         if os.path.exists(path):
@@ -50,7 +50,7 @@ def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache:
         for sign in (1.0, -1.0):
             for name, (value, t) in base.items():
                 scene.params[name] = value + np.float32(sign * eps) * t
-            images.append(scene.render(spp=spp, seed=seed, threads=threads))
+            images.append(scene.render(spp=spp, seed=seed, threads=threads, max_depth=max_depth))
     finally:
         for name, (value, _) in base.items():
             scene.params[name] = value

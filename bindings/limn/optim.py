@@ -79,11 +79,12 @@ class FitResult:
 
 def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: float = 20.0, loss=l2, spp: int = 8,
         spp_primary: int | None = None, spp_boundary: int | None = None, mask=None, faces=None, callback=None,
-        seed: int = 0) -> FitResult:
+        seed: int = 0, options: dict | None = None) -> FitResult:
     """Optimise the vertex positions ``name`` (shared by every scene in ``views``, a list of
     (scene, target image) pairs) to match the targets. ``faces`` (F x 3) enables Large Steps with
     ``lambda_`` (0 disables it); ``mask`` (N,) of 0/1 holds vertices with 0 fixed.
-    ``callback(iteration, loss, vertices)`` may return False to stop (the last good state stays)."""
+    ``callback(iteration, loss, vertices)`` may return False to stop (the last good state stays).
+    ``options`` go to every ``render_backward`` call (e.g. ``guiding``, ``grid_resolution``)."""
     if not views:
         raise ValueError("fit: no views")
     scenes = [s for s, _ in views]
@@ -106,7 +107,7 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
             value, adjoint = loss(img, target)
             total += value
             g = s.render_backward(adjoint, spp=spp, spp_primary=spp_primary, spp_boundary=spp_boundary,
-                                  seed=seed + 104729 * it + k)
+                                  seed=seed + 104729 * it + k, **(options or {}))
             grad += g[name]
         if keep is not None:
             grad *= keep

@@ -83,10 +83,11 @@ class Scene:
         return self._native.update()
 
     def render(self, spp: int | None = None, seed: int = 0, threads: int = 0,
-               progress: Callable[[float], bool | None] | None = None) -> np.ndarray:
+               progress: Callable[[float], bool | None] | None = None, max_depth: int | None = None) -> np.ndarray:
         """Render the scene; returns a (H, W, 3) float32 array of linear RGB radiance.
 
         The same ``seed`` gives the same image for any number of ``threads`` (0 = all cores).
+        ``max_depth`` overrides the path integrator's longest path (-1: unbounded).
         ``progress(fraction)`` is called from time to time; returning False cancels with
         :class:`limn.RenderCancelled`. Statistics of the call are kept in ``last_stats``."""
         if spp is not None and spp <= 0:
@@ -94,7 +95,7 @@ class Scene:
         if seed < 0:
             raise ValueError(f"seed must be >= 0 (got {seed})")
         self.update()
-        image, self.last_stats = self._native.render(spp or 0, seed, threads, progress)
+        image, self.last_stats = self._native.render(spp or 0, seed, threads, progress, max_depth)
         if self.last_stats["invalid_samples"]:
             warnings.warn(f"{self._native.source}: {self.last_stats['invalid_samples']} invalid (NaN/Inf) samples were dropped",
                           stacklevel=2)
@@ -114,7 +115,8 @@ class Scene:
     def differentiable(self) -> list[str]:
         return list(self._differentiable)
 
-    def _diff_options(self, spp, spp_interior, spp_primary, spp_boundary, guiding, seed):
+    def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, guiding, grid_resolution, guiding_spp,
+                      max_depth, threads) -> dict:
         if not self._differentiable:
             raise ValueError(f"{self._native.source}: no differentiable parameters; call set_differentiable() first")
         if guiding not in ("none", "grid"):
@@ -127,8 +129,12 @@ class Scene:
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
+        if grid_resolution < 1 or guiding_spp < 1:
+            raise ValueError(f"grid_resolution and guiding_spp must be >= 1 (got {grid_resolution}, {guiding_spp})")
         self.update()
-        return interior, spp_primary, spp_boundary
+        return {"spp_interior": interior, "spp_primary": spp_primary, "spp_boundary": spp_boundary, "seed": seed,
+                "threads": threads, "guiding": guiding, "grid_resolution": grid_resolution, "guiding_spp": guiding_spp,
+                "max_depth": max_depth}
 
     def _report(self, stats: dict) -> None:
         self.last_stats = stats
@@ -141,19 +147,22 @@ class Scene:
 
     def render_forward(self, tangents: dict, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
                        spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none",
-                       grid_resolution: int = 32, guiding_spp: int = 4, threads: int = 0, progress=None) -> np.ndarray:
+                       grid_resolution: int = 32, guiding_spp: int = 4, max_depth: int | None = None, threads: int = 0,
+                       progress=None) -> np.ndarray:
         """Derivative image d(image)/d(theta) along ``tangents`` ({name: array shaped like the
         parameter}; differentiable parameters that are not listed get a zero tangent).
 
         Terms: the interior term (``spp_interior`` paths per pixel, default ``spp`` or the scene's
         sampler) and the primary-visibility boundary term for silhouettes seen directly
         (``spp_primary`` samples per pixel on average, default the same; 0 switches it off), and the
-        indirect boundary term for mesh edges: shadows and silhouettes seen in reflections
-        (``spp_boundary``, default the same; ``guiding="none"`` samples edges and directions
-        uniformly, ``"grid"`` guides them with a uniform grid of ``grid_resolution`` cells along
-        the edges (and R/4 x R/2 over directions) filled with ``guiding_spp`` points per cell). Spheres have no indirect boundary term yet: a warning says so.
-        ``last_stats["summary"]`` lists what was computed and what was skipped."""
-        interior, primary, boundary = self._diff_options(spp, spp_interior, spp_primary, spp_boundary, guiding, seed)
+        indirect boundary term for mesh edges and sphere surfaces: shadows and silhouettes seen in
+        reflections (``spp_boundary``, default the same; ``guiding="none"`` samples the boundary
+        sample space uniformly, ``"grid"`` guides it with a uniform grid of ``grid_resolution``
+        cells along the first axis (and R/4 x R/2 over the others) filled with ``guiding_spp``
+        points per cell). ``max_depth`` overrides the path integrator's longest path for every
+        term. ``last_stats["summary"]`` lists what was computed and what was skipped."""
+        options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, guiding, grid_resolution, guiding_spp,
+                                     max_depth, threads)
         for n in tangents:
             if n not in self._differentiable:
                 raise ValueError(f"tangent given for '{n}', which is not differentiable (differentiable: {self._differentiable})")
@@ -166,23 +175,28 @@ class Scene:
             if not np.isfinite(t).all():
                 raise ValueError(f"tangent of '{n}' has non-finite values")
             arrays.append(np.ascontiguousarray(t))
-        image, stats = self._native.render_forward(self._differentiable, arrays, interior, primary, boundary, seed, threads, progress,
-                                                   guiding, grid_resolution, guiding_spp)
+        image, stats = self._native.render_forward(self._differentiable, arrays, options, progress)
         self._report(stats)
         return image
 
+    def faces(self, shape_id: str) -> np.ndarray:
+        """Triangles (F, 3) int32 of mesh shape ``shape_id``, indexing ``params["<id>.vertex_positions"]``
+        (vertices are welded by position when loaded, so this can differ from the file's)."""
+        return self._native.faces(shape_id)
+
     def render_backward(self, adjoint, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
                         spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none",
-                        grid_resolution: int = 32, guiding_spp: int = 4, threads: int = 0, progress=None) -> dict:
+                        grid_resolution: int = 32, guiding_spp: int = 4, max_depth: int | None = None, threads: int = 0,
+                        progress=None) -> dict:
         """Gradient of sum(adjoint * image) for every differentiable parameter, as {name: array
         shaped like the parameter}. ``adjoint`` is a (H, W, 3) array, e.g. dLoss/dImage.
         Same terms and caveats as :meth:`render_forward`."""
-        interior, primary, boundary = self._diff_options(spp, spp_interior, spp_primary, spp_boundary, guiding, seed)
+        options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, guiding, grid_resolution, guiding_spp,
+                                     max_depth, threads)
         a = np.asarray(adjoint, dtype=np.float32)
         if a.shape != (self.height, self.width, 3):
             raise ValueError(f"adjoint must have shape {(self.height, self.width, 3)}, got {a.shape}")
-        grads, stats = self._native.render_backward(self._differentiable, np.ascontiguousarray(a), interior, primary, boundary,
-                                                    seed, threads, progress, guiding, grid_resolution, guiding_spp)
+        grads, stats = self._native.render_backward(self._differentiable, np.ascontiguousarray(a), options, progress)
         self._report(stats)
         return dict(zip(self._differentiable, grads))
 

@@ -77,17 +77,23 @@ py::dict diff_stats_dict(const DiffStats& st) {
   return d;
 }
 
-DiffOptions diff_options(int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads,
-                         const std::string& guiding, int grid_resolution, int guiding_spp) {
+// DiffOptions from the keyword options of Scene.render_forward / render_backward (bindings/limn/
+// scene.py validates and fills them; an unknown key here is a binding bug, reported as such).
+DiffOptions diff_options(const py::dict& options) {
   DiffOptions o;
-  o.guiding = guiding;
-  o.grid_resolution = grid_resolution;
-  o.guiding_spp = guiding_spp;
-  o.spp_interior = spp_interior;
-  o.spp_primary = spp_primary;
-  o.spp_boundary = spp_boundary;
-  o.seed = seed;
-  o.threads = threads;
+  for (const auto& [key, value] : options) {
+    const std::string k = py::str(key);
+    if (k == "spp_interior") o.spp_interior = value.cast<int>();
+    else if (k == "spp_primary") o.spp_primary = value.cast<int>();
+    else if (k == "spp_boundary") o.spp_boundary = value.cast<int>();
+    else if (k == "seed") o.seed = value.cast<uint64_t>();
+    else if (k == "threads") o.threads = value.cast<int>();
+    else if (k == "guiding") o.guiding = value.cast<std::string>();
+    else if (k == "grid_resolution") o.grid_resolution = value.cast<int>();
+    else if (k == "guiding_spp") o.guiding_spp = value.cast<int>();
+    else if (k == "max_depth") o.max_depth = value.is_none() ? kSceneMaxDepth : value.cast<int>();
+    else throw std::invalid_argument("unknown derivative option '" + k + "'");
+  }
   return o;
 }
 
@@ -106,8 +112,9 @@ auto run_released(std::exception_ptr& error, F&& f) {
 
 // Render with the GIL released. The progress callback (if any) runs with the GIL re-acquired;
 // it also gives Ctrl-C a chance: a pending signal cancels the render and is re-raised here.
-py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int threads, py::object progress) {
+py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int threads, py::object progress, py::object max_depth) {
   RenderOptions opt;
+  if (!max_depth.is_none()) opt.max_depth = max_depth.cast<int>();
   opt.spp = spp;
   opt.seed = seed;
   opt.threads = threads;
@@ -126,8 +133,7 @@ py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int thr
 }
 
 py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::string>& names, const std::vector<py::array>& tangents,
-                            int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress,
-                            const std::string& guiding, int grid_resolution, int guiding_spp) {
+                            const py::dict& options, py::object progress) {
   const DiffParams params(*scene, names);
   if (tangents.size() != params.params().size()) throw std::invalid_argument("one tangent per differentiable parameter expected");
   std::vector<double> t(params.slot_count(), 0.0);
@@ -137,7 +143,7 @@ py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::str
     if (!a || size_t(a.size()) != p.size) throw std::invalid_argument("tangent of '" + p.name + "' has the wrong size");
     std::copy(a.data(), a.data() + a.size(), t.begin() + long(p.offset));
   }
-  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads, guiding, grid_resolution, guiding_spp);
+  DiffOptions opt = diff_options(options);
   std::exception_ptr error;
   opt.progress = progress_adapter(progress, error);
   DiffStats st;
@@ -147,11 +153,10 @@ py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::str
 }
 
 py::tuple render_backward_py(const SceneHandle& scene, const std::vector<std::string>& names, const py::array& adjoint,
-                             int spp_interior, int spp_primary, int spp_boundary, uint64_t seed, int threads, py::object progress,
-                             const std::string& guiding, int grid_resolution, int guiding_spp) {
+                             const py::dict& options, py::object progress) {
   const DiffParams params(*scene, names);
   Image adj = numpy_to_image(adjoint);
-  DiffOptions opt = diff_options(spp_interior, spp_primary, spp_boundary, seed, threads, guiding, grid_resolution, guiding_spp);
+  DiffOptions opt = diff_options(options);
   std::exception_ptr error;
   opt.progress = progress_adapter(progress, error);
   DiffStats st;
@@ -184,6 +189,7 @@ PYBIND11_MODULE(_core, m) {
 
   py::class_<Scene, SceneHandle>(m, "Scene")
       .def("render", &render_scene, py::arg("spp") = 0, py::arg("seed") = 0, py::arg("threads") = 0, py::arg("progress") = py::none(),
+           py::arg("max_depth") = py::none(),
            "Render; returns (image (H, W, 3) float32, stats dict). Releases the GIL.")
       .def("parameter_names", [](const SceneHandle& s) {
         std::vector<std::string> names;
@@ -191,13 +197,22 @@ PYBIND11_MODULE(_core, m) {
         return names;
       })
       .def("parameter", &parameter_view, "Writable float32 view of a parameter")
+      .def("faces", [](const SceneHandle& s, const std::string& id) {
+        for (const Shape& sh : s->shapes) {
+          if (sh.id != id) continue;
+          if (!sh.is_mesh()) throw std::invalid_argument(s->source + ": shape '" + id + "' is a " + sh.type + ", not a mesh");
+          const Mesh& m = sh.mesh();
+          py::array_t<int32_t> f({py::ssize_t(m.indices.size() / 3), py::ssize_t(3)});
+          std::copy(m.indices.begin(), m.indices.end(), f.mutable_data());
+          return f;
+        }
+        throw std::invalid_argument(s->source + ": no shape '" + id + "'");
+      }, py::arg("id"), "Triangle indices (F, 3) of mesh shape `id`, into its welded vertex_positions")
       .def("update", &Scene::update, "Apply parameter edits; returns the names that changed")
-      .def("render_forward", &render_forward_py, py::arg("names"), py::arg("tangents"), py::arg("spp_interior") = 0,
-           py::arg("spp_primary") = 0, py::arg("spp_boundary") = 0, py::arg("seed") = 0, py::arg("threads") = 0,
-           py::arg("progress") = py::none(), py::arg("guiding") = "none", py::arg("grid_resolution") = 32, py::arg("guiding_spp") = 4)
-      .def("render_backward", &render_backward_py, py::arg("names"), py::arg("adjoint"), py::arg("spp_interior") = 0,
-           py::arg("spp_primary") = 0, py::arg("spp_boundary") = 0, py::arg("seed") = 0, py::arg("threads") = 0,
-           py::arg("progress") = py::none(), py::arg("guiding") = "none", py::arg("grid_resolution") = 32, py::arg("guiding_spp") = 4)
+      .def("render_forward", &render_forward_py, py::arg("names"), py::arg("tangents"), py::arg("options"),
+           py::arg("progress") = py::none())
+      .def("render_backward", &render_backward_py, py::arg("names"), py::arg("adjoint"), py::arg("options"),
+           py::arg("progress") = py::none())
       .def_property_readonly("width", [](const Scene& s) { return s.camera.width; })
       .def_property_readonly("height", [](const Scene& s) { return s.camera.height; })
       .def_property_readonly("spp", [](const Scene& s) { return s.spp; })

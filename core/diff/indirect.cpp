@@ -42,8 +42,8 @@ bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const Sur
 
 }  // namespace
 
-IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params)
-    : m_scene(scene), m_params(params), m_space(scene, params) {
+IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params, int max_depth)
+    : m_scene(scene), m_params(params), m_space(scene, params), m_max_depth(max_depth) {
   for (size_t i = 0; i < scene.emitters.size(); ++i)
     if (scene.emitters[i].is_delta()) m_delta_lights.push_back(int(i));
 }
@@ -89,7 +89,7 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
   const Vec3 &xb = p.xb, &w = p.w, &n_b = p.n_b;
   const float delta = p.delta;
   // Importance: the observing surface along +w, connected to the camera.
-  const int max_depth = m_scene.integrator.max_depth;
+  const int max_depth = m_max_depth;
   if (max_depth >= 0 && max_depth < 2) return;  // camera -> observer -> edge needs two segments
   Ray ray{xb + delta * p.n_out, w, 0.0f, kInfinity};
   SurfaceInteraction y;

@@ -27,7 +27,7 @@ namespace limn {
 
 class IndirectBoundary {
  public:
-  IndirectBoundary(const Scene& scene, const DiffParams& params);
+  IndirectBoundary(const Scene& scene, const DiffParams& params, int max_depth);
 
   bool empty() const { return m_space.empty(); }
   const BoundarySpace& space() const { return m_space; }
@@ -59,6 +59,7 @@ class IndirectBoundary {
   const DiffParams& m_params;
   BoundarySpace m_space;
   std::vector<int> m_delta_lights;
+  int m_max_depth;
 };
 
 }  // namespace limn

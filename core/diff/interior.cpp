@@ -232,10 +232,10 @@ struct Replay {
 }  // namespace
 
 ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& params, const Ray& camera_ray, Pcg32& rng,
-                                       PathInputs& inputs, PathCounters& counters) {
+                                       PathInputs& inputs, PathCounters& counters, int max_depth) {
   const IntegratorSettings& cfg = scene.integrator;
   VV L;
-  if (cfg.max_depth == 0) return L;
+  if (max_depth == 0) return L;
   const Replay R{scene, params, inputs};
 
   // Primal state, exactly as path_radiance() keeps it.
@@ -307,7 +307,7 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
       L = L + beta * R.emitter_value(shape.emitter, rad) * Var(w);
     }
 
-    if (cfg.max_depth >= 0 && depth + 2 > cfg.max_depth) break;
+    if (max_depth >= 0 && depth + 2 > max_depth) break;
 
     const Bsdf& bsdf = scene.bsdfs[shape.bsdf];
     const Vec3 wi_local = si.frame.to_local(-ray.d);

@@ -20,7 +20,8 @@ struct InteriorCounters {
 
 // Radiance along camera_ray as three tape variables (R, G, B); consumes random numbers exactly as
 // path_radiance() does, so its value equals the primal estimate.
+// max_depth: as IntegratorSettings::max_depth.
 ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& params, const Ray& camera_ray, Pcg32& rng,
-                                       PathInputs& inputs, PathCounters& counters);
+                                       PathInputs& inputs, PathCounters& counters, int max_depth);
 
 }  // namespace limn

@@ -34,7 +34,8 @@ bool outline(const ad::V3<T>& c, const T& r, const ad::V3<double>& eye, ad::V3<T
 
 }  // namespace
 
-PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
+PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, int max_depth)
+    : m_scene(scene), m_params(params), m_max_depth(max_depth) {
   const FilmProjection proj(scene.camera);
   const ad::V3<double> eye = d3(scene.camera.world_from_camera.point(Vec3(0.0f)));
   auto film_of = [&](const ad::V3<double>& p, Vec2d& s) {
@@ -154,7 +155,7 @@ bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& d
     const double sign = side == 0 ? -1.0 : 1.0;
     const Vec2 film(float(fx.v + sign * kProbeOffset * n.x), float(fy.v + sign * kProbeOffset * n.y));
     Pcg32 r = rng_paths;
-    L[side] = path_radiance(m_scene, m_scene.camera.generate_ray(film), r, counters);
+    L[side] = path_radiance(m_scene, m_scene.camera.generate_ray(film), r, counters, PathLimits{m_max_depth, true});
   }
   rays += counters.rays;
   delta_L = (L[0] - L[1]) / float(pdf_length);

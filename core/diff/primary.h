@@ -26,7 +26,7 @@ struct SilhouetteCurve {
 class PrimaryBoundary {
  public:
   // Collects the candidate curves of the differentiable shapes as seen from the camera.
-  PrimaryBoundary(const Scene& scene, const DiffParams& params);
+  PrimaryBoundary(const Scene& scene, const DiffParams& params, int max_depth);
 
   bool empty() const { return m_curves.empty(); }
   size_t curve_count() const { return m_curves.size(); }
@@ -44,6 +44,7 @@ class PrimaryBoundary {
   std::vector<SilhouetteCurve> m_curves;
   Distribution1D m_select;
   uint64_t m_skipped = 0;
+  int m_max_depth;
 };
 
 }  // namespace limn

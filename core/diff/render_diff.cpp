@@ -140,11 +140,11 @@ void fill_stats(DiffStats* stats, std::chrono::steady_clock::time_point start, u
 
 // One camera path of pixel (x, y) replayed on a cleared tape (the same film sample as render()).
 ad::V3<ad::Var> replay_camera_path(const Scene& scene, const DiffParams& params, int x, int y, Pcg32& rng, PathInputs& in,
-                                   PathCounters& counters) {
+                                   PathCounters& counters, int max_depth) {
   ad::Tape::current().clear();
   in.clear();
   const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();
-  return interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters);
+  return interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters, max_depth);
 }
 
 bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
@@ -163,7 +163,7 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
   BoundaryTerms terms;
   if (!params.any_geometry()) return terms;
   if (opt.spp_primary > 0) {
-    terms.primary = std::make_unique<PrimaryBoundary>(scene, params);
+    terms.primary = std::make_unique<PrimaryBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
     const uint64_t n = samples_for(scene, opt.spp_primary);
     if (!terms.primary->empty())
       for_each_boundary_sample(n, kPrimaryTag, opt, [&](Pcg32& rng, PathInputs& in) {
@@ -178,7 +178,7 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
       });
   }
   if (opt.spp_boundary > 0) {
-    terms.indirect = std::make_unique<IndirectBoundary>(scene, params);
+    terms.indirect = std::make_unique<IndirectBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
     const uint64_t n = samples_for(scene, opt.spp_boundary);
     if (!terms.indirect->empty() && opt.guiding == "grid") {
       const auto t0 = std::chrono::steady_clock::now();
@@ -223,6 +223,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
                                 std::to_string(params.slot_count()));
   const auto start = std::chrono::steady_clock::now();
   const auto lock = scene.render_lock();
+  const int max_depth = effective_max_depth(scene, opt.max_depth);
   const int W = scene.camera.width, H = scene.camera.height;
   const int spp = opt.spp_interior > 0 ? opt.spp_interior : scene.spp;
   Image img{W, H, std::vector<float>(size_t(W) * H * 3, 0.0f)};
@@ -236,7 +237,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     double sum[3] = {0, 0, 0};
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters);
+      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters, max_depth);
       double d[3] = {0, 0, 0};
       bool ok = std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v);
       for (int c = 0; c < 3 && ok; ++c) {
@@ -287,6 +288,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     if (!std::isfinite(a)) throw std::invalid_argument(scene.source + ": the adjoint image has non-finite values");
   const auto start = std::chrono::steady_clock::now();
   const auto lock = scene.render_lock();
+  const int max_depth = effective_max_depth(scene, opt.max_depth);
   const int spp = opt.spp_interior > 0 ? opt.spp_interior : scene.spp;
   tbb::enumerable_thread_specific<std::vector<double>> grads(std::vector<double>(params.slot_count(), 0.0));
   std::atomic<uint64_t> rays{0}, invalid{0};
@@ -300,7 +302,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     PathCounters counters;
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters);
+      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters, max_depth);
       if (!(std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v))) {
         ++bad;
         continue;

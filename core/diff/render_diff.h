@@ -21,6 +21,7 @@ struct DiffOptions {
   std::string guiding = "none";  // indirect boundary: "none" (uniform) or "grid" (core/guiding/grid.h)
   int grid_resolution = 32;      // grid cells along the edge axis; (R/4, R/2) along the direction axes
   int guiding_spp = 4;           // random points per grid cell when the grid is built
+  int max_depth = kSceneMaxDepth;  // path integrator: overrides the scene's max_depth for every term
   uint64_t seed = 0;
   int threads = 0;
   std::function<bool(float)> progress;

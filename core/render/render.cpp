@@ -16,6 +16,7 @@ Image render(const Scene& scene, const RenderOptions& options, RenderStats* stat
   const int W = scene.camera.width, H = scene.camera.height;
   const int spp = options.spp > 0 ? options.spp : scene.spp;
   if (spp <= 0) throw std::invalid_argument("spp must be > 0 (got " + std::to_string(spp) + ")");
+  const int max_depth = effective_max_depth(scene, options.max_depth);
   Image img{W, H, std::vector<float>(size_t(W) * H * 3, 0.0f)};
 
   constexpr int kTile = 16;
@@ -37,7 +38,7 @@ Image render(const Scene& scene, const RenderOptions& options, RenderStats* stat
         Spectrum sum(0.0f);
         for (int s = 0; s < spp; ++s) {
           const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();  // box filter over the pixel
-          const Spectrum L = path_radiance(scene, scene.camera.generate_ray(film), rng, counters);
+          const Spectrum L = path_radiance(scene, scene.camera.generate_ray(film), rng, counters, PathLimits{max_depth, true});
           if (is_finite(L) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) sum += L;
           else ++bad;
         }

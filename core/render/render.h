@@ -17,6 +17,7 @@ struct RenderOptions {
   int spp = 0;             // 0: the scene's sampler sample_count
   uint64_t seed = 0;
   int threads = 0;         // 0: all cores
+  int max_depth = kSceneMaxDepth;  // path integrator: overrides the scene's max_depth (-1: unbounded)
   // Called now and then with the finished fraction; returning false cancels the render.
   std::function<bool(float)> progress;
 };

@@ -12,6 +12,9 @@
 
 namespace limn {
 
+// RenderOptions / DiffOptions max_depth meaning "the scene's integrator setting".
+inline constexpr int kSceneMaxDepth = -2;
+
 struct IntegratorSettings {
   std::string type = "path";  // "path" or "direct"
   int max_depth = -1;         // longest path in segments (Mitsuba: 1 = emitters seen directly); -1 = unbounded
@@ -79,5 +82,17 @@ class Scene {
   std::vector<Parameter> m_params;
   std::vector<std::vector<float>> m_snapshots;  // value of each parameter at the last update()
 };
+
+// The path length a render or derivative call uses: the scene's, or `requested` (>= -1) for the
+// path integrator. Throws std::invalid_argument naming the scene for anything else.
+inline int effective_max_depth(const Scene& scene, int requested) {
+  if (requested == kSceneMaxDepth) return scene.integrator.max_depth;
+  if (requested < -1)
+    throw std::invalid_argument(scene.source + ": max_depth must be >= -1 (-1: unbounded), got " + std::to_string(requested));
+  if (scene.integrator.type != "path")
+    throw std::invalid_argument(scene.source + ": max_depth applies to the path integrator; this scene uses '" +
+                                scene.integrator.type + "'");
+  return requested;
+}
 
 }  // namespace limn

@@ -153,6 +153,34 @@ def test_multi_bounce_derivatives_agree_with_fd_in_expectation(bsdf, name, tange
     assert abs(fwd.mean() - ref.mean()) < 0.05 * abs(ref.mean()) + 4 * ref.mean(axis=(1, 2, 3)).std() / np.sqrt(6)
 
 
+def test_max_depth_option_matches_fd_at_that_depth():
+    """``max_depth`` overrides the path length of render, fd, render_forward and render_backward."""
+    scene = limn.load_dict(inside_sphere(DIFFUSE, max_depth=4))
+    t = {"dome.radius": np.float32(1.0)}
+    scene.set_differentiable(list(t))
+    short = scene.render(spp=16, max_depth=2)
+    assert short.mean() < 0.8 * scene.render(spp=16).mean()  # the dome's interreflections are gone
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fwd = np.stack([scene.render_forward(t, spp=128, spp_primary=0, spp_boundary=0, seed=30 + k, max_depth=2) for k in range(6)])
+        full = scene.render_forward(t, spp=128, spp_primary=0, spp_boundary=0, seed=30)
+    ref = np.stack([limn.fd(scene, t, eps=1e-3, spp=128, seed=40 + k, cache=False, max_depth=2) for k in range(6)])
+    assert np.abs(block_z(fwd, ref)).max() < 4.5
+    assert abs(full.mean() - fwd[0].mean()) > 0.1 * abs(fwd[0].mean())
+    adjoint = np.random.default_rng(3).normal(size=fwd[0].shape).astype(np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = scene.render_backward(adjoint, spp=128, spp_primary=0, spp_boundary=0, seed=30, max_depth=2)
+    lhs, rhs = float((adjoint.astype(np.float64) * fwd[0]).sum()), float(g["dome.radius"])
+    assert abs(lhs - rhs) <= 1e-3 * abs(rhs), (lhs, rhs)
+    with pytest.raises(ValueError, match="max_depth must be >= -1"):
+        scene.render(max_depth=-3)
+    direct = limn.load_dict(floor_scene(DIFFUSE))
+    direct.set_differentiable(["lamp.radiance"])
+    with pytest.raises(ValueError, match="applies to the path integrator"):
+        direct.render_forward({"lamp.radiance": np.ones(3, np.float32)}, spp=1, max_depth=3)
+
+
 def test_backward_matches_forward():
     """sum(adjoint * forward image) == <gradient, tangent> for the same seed."""
     d = floor_scene(GLOSSY, integrator={"type": "path", "max_depth": 3})

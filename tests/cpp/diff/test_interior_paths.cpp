@@ -50,7 +50,7 @@ struct PathProbe {
     PathInputs in;
     PathCounters c;
     ad::Tape::current().clear();
-    const auto L = interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, c);
+    const auto L = interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, c, scene.integrator.max_depth);
     const Spectrum L0 = primal(k, 0.0f);
     CAPTURE(k);
     CHECK(L.x.v == doctest::Approx(L0.x).epsilon(1e-4));
