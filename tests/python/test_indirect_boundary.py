@@ -2,14 +2,28 @@
 spheres): shadows of a moving occluder and its silhouette seen in a glossy reflection."""
 from __future__ import annotations
 
+import json
+import os
 import warnings
 
 import numpy as np
 import pytest
 
 import limn
-from conftest import camera
+from conftest import SCENES
 from test_derivatives import block_z
+
+VALIDATION = os.path.join(SCENES, "validation")
+
+
+def validation(name):
+    """scenes/validation/<name>.json as a dict (README.md there lists the cases)."""
+    with open(os.path.join(VALIDATION, name + ".json")) as f:
+        return json.load(f)
+
+
+def load(d):
+    return limn.load_dict(d, base_dir=VALIDATION)
 
 
 def quiet(fn, *args, **kw):
@@ -18,18 +32,11 @@ def quiet(fn, *args, **kw):
         return fn(*args, **kw)
 
 
+POINT, AREA = "point", "area"
+
+
 def shadow_scene(light):
-    return {"type": "scene", "integrator": {"type": "direct"},
-            "sensor": camera((0, -4, 3), (0.3, 0.3, 0.3), fov=45, width=16, height=16, spp=64),
-            "floor": {"type": "rectangle", "to_world": {"scale": 4}, "bsdf": {"type": "diffuse", "reflectance": 0.6}},
-            "box": {"type": "cube", "to_world": [{"scale": 0.3}, {"translate": [0.4, 0.2, 1.2]}],
-                    "bsdf": {"type": "diffuse", "reflectance": 0.4}},
-            "lamp": light}
-
-
-POINT = {"type": "point", "position": [0.6, 0.6, 4.0], "intensity": 30.0}
-AREA = {"type": "rectangle", "to_world": [{"rotate": {"axis": [1, 0, 0], "angle": 180}}, {"translate": [0.6, 0.6, 3.0]}],
-        "emitter": {"type": "area", "radiance": 10.0}}
+    return validation("occluder_" + light)
 
 
 def compare(scene, name, t, spp_boundary, seeds=8, fd_spp=1024):
@@ -44,7 +51,7 @@ def compare(scene, name, t, spp_boundary, seeds=8, fd_spp=1024):
 
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_moving_occluder_shadow(light, spp_boundary):
-    scene = limn.load_dict(shadow_scene(light))
+    scene = load(shadow_scene(light))
     name = "box.vertex_positions"
     t = np.zeros_like(scene.params[name])
     t[:, 0] = 1.0
@@ -60,7 +67,7 @@ def test_moving_occluder_shadow(light, spp_boundary):
 def test_moving_receiver_under_a_static_occluder(light, spp_boundary):
     """The floor rises under a static box: the boundary (the box's edges) does not move, the
     segments from the floor past it do (their end on the floor slides along the camera ray)."""
-    scene = limn.load_dict(shadow_scene(light))
+    scene = load(shadow_scene(light))
     name = "floor.to_world.translation"
     t = np.float32([0, 0, 1])
     scene.set_differentiable([name])
@@ -69,36 +76,14 @@ def test_moving_receiver_under_a_static_occluder(light, spp_boundary):
     assert np.abs(z_off).max() > 10, z_off
 
 
-def bumpy_grid(n=12, size=1.6):
-    """A flat-shaded height field mesh with two bumps that shadow the rest of it."""
-    xs = np.linspace(-size, size, n + 1, dtype=np.float32)
-    X, Y = np.meshgrid(xs, xs, indexing="ij")
-    Z = 0.6 * np.exp(-((X - 0.4) ** 2 + (Y - 0.2) ** 2) / 0.15) + 0.4 * np.exp(-((X + 0.6) ** 2 + (Y + 0.3) ** 2) / 0.1)
-    v = np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1).astype(np.float32)
-    f = []
-    for i in range(n):
-        for j in range(n):
-            a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
-            f += [[a, b, c], [a, c, d]]
-    return v, np.int32(f)
-
-
-@pytest.mark.parametrize("light,spp_boundary", [
-    ({"type": "point", "position": [3.0, 1.5, 1.5], "intensity": 40.0}, 16),
-    ({"type": "rectangle", "to_world": [{"scale": 0.5}, {"rotate": {"axis": [0, 1, 0], "angle": -70}}, {"translate": [3.0, 1.0, 1.5]}],
-      "emitter": {"type": "area", "radiance": 20.0}}, 512)], ids=["point light", "area light"])
+@pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_self_shadowing_under_deformation(light, spp_boundary):
     """Bumps of one mesh shadow the mesh itself under a low light, and the deformation (the bumps
     grow) moves occluder and receiver at once."""
-    v, f = bumpy_grid()
-    scene = limn.load_dict({"type": "scene", "integrator": {"type": "direct"},
-                            "sensor": camera((0, -4, 3.5), (0, 0, 0), fov=40, width=16, height=16, spp=64),
-                            "terrain": {"type": "mesh", "vertex_positions": v, "faces": f, "face_normals": True,
-                                        "bsdf": {"type": "diffuse", "reflectance": 0.5}},
-                            "lamp": light})
+    scene = load(validation("self_shadow_" + light))
     name = "terrain.vertex_positions"
-    t = np.zeros_like(v)
-    t[:, 2] = v[:, 2]  # heights scale up
+    t = np.zeros_like(scene.params[name])
+    t[:, 2] = scene.params[name][:, 2]  # heights scale up
     scene.set_differentiable([name])
     z_on, z_off = compare(scene, name, t, spp_boundary)
     assert np.abs(z_on).max() < 5.0, z_on
@@ -106,16 +91,7 @@ def test_self_shadowing_under_deformation(light, spp_boundary):
 
 
 def glossy_scene(emitter_reflectance):
-    return {"type": "scene", "integrator": {"type": "path", "max_depth": 3},
-         "sensor": camera((0, -3, 0.6), (0, 0, 0.4), fov=40, width=16, height=16, spp=64),
-         "plane": {"type": "rectangle", "to_world": {"scale": 3},
-                   "bsdf": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}},
-         "emitter": {"type": "rectangle", "to_world": [{"scale": [3, 1.5, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 90}},
-                                                      {"translate": [0, 2.5, 1.2]}],
-                     "bsdf": {"type": "diffuse", "reflectance": emitter_reflectance},
-                     "emitter": {"type": "area", "radiance": 2.0}},
-         "shape": {"type": "cube", "to_world": [{"scale": 0.25}, {"rotate": {"axis": [0, 0, 1], "angle": 30}}, {"translate": [0.1, 1.0, 0.7]}],
-                   "bsdf": {"type": "diffuse", "reflectance": 0.1}}}
+    return validation("glossy_reflection_reflective_emitter" if emitter_reflectance else "glossy_reflection")
 
 
 @pytest.mark.parametrize("emitter_reflectance", [0.0, 0.5])
@@ -126,7 +102,7 @@ def test_silhouette_seen_in_a_glossy_reflection(emitter_reflectance):
     reflection (camera -> emitter -> plane -> light), which needs importance beyond the first
     observing vertex for bounded paths. (It was ~5e-4 of the peak off while the jump also counted
     the cube's own radiance, see test_emitting_occluder_seen_in_a_glossy_reflection.)"""
-    scene = limn.load_dict(glossy_scene(emitter_reflectance))
+    scene = load(glossy_scene(emitter_reflectance))
     name = "shape.vertex_positions"
     t = np.zeros_like(scene.params[name])
     t[:, 0] = 1.0
@@ -141,10 +117,7 @@ def test_emitting_occluder_seen_in_a_glossy_reflection():
     term attaches the cube's points to it (material form), so the boundary jump is the dim
     background alone; counting the cube's own radiance in the jump as well (L_fg - L_bg, right only
     for directions held fixed) put block z-scores above 10 here."""
-    d = glossy_scene(0.0)
-    d["shape"]["emitter"] = {"type": "area", "radiance": 5.0}
-    d["emitter"]["emitter"]["radiance"] = 1.5
-    scene = limn.load_dict(d)
+    scene = load(validation("emitting_occluder_reflection"))
     name = "shape.vertex_positions"
     t = np.zeros_like(scene.params[name])
     t[:, 0] = 1.0
@@ -157,7 +130,7 @@ def test_emitting_occluder_seen_in_a_glossy_reflection():
 def test_backward_matches_forward_with_all_terms():
     d = shadow_scene(AREA)
     d["ball"] = {"type": "sphere", "center": [-0.5, 0.3, 0.9], "radius": 0.3}
-    scene = limn.load_dict(d)
+    scene = load(d)
     names = ["box.vertex_positions", "box.reflectance", "ball.center", "ball.radius"]
     scene.set_differentiable(names)
     rng = np.random.default_rng(8)
@@ -170,20 +143,12 @@ def test_backward_matches_forward_with_all_terms():
     assert abs(lhs - rhs) <= 1e-3 * abs(rhs), (lhs, rhs)
 
 
-def sphere_shadow_scene(light):
-    d = shadow_scene(light)
-    del d["box"]
-    d["ball"] = {"type": "sphere", "center": [0.4, 0.2, 1.2], "radius": 0.35,
-                 "bsdf": {"type": "diffuse", "reflectance": 0.4}}
-    return d
-
-
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 @pytest.mark.parametrize("name,t", [("ball.center", [1.0, 0.0, 0.0]), ("ball.radius", 1.0)], ids=["centre", "radius"])
 def test_moving_sphere_shadow(light, spp_boundary, name, t):
     """Interior (curvature) part of Eq. 4: a sphere's shadow moves with its centre and grows with
     its radius; with point lights through the light's silhouette circle on the sphere."""
-    scene = limn.load_dict(sphere_shadow_scene(light))
+    scene = load(validation("sphere_occluder_" + light))
     t = np.float32(t)
     scene.set_differentiable([name])
     z_on, z_off = compare(scene, name, t, spp_boundary)
@@ -194,9 +159,7 @@ def test_moving_sphere_shadow(light, spp_boundary, name, t):
 
 
 def test_sphere_seen_in_a_glossy_reflection():
-    d = glossy_scene(0.0)
-    d["shape"] = {"type": "sphere", "center": [0.1, 1.0, 0.7], "radius": 0.3, "bsdf": {"type": "diffuse", "reflectance": 0.1}}
-    scene = limn.load_dict(d)
+    scene = load(validation("sphere_glossy_reflection"))
     name = "shape.center"
     scene.set_differentiable([name])
     z_on, z_off = compare(scene, name, np.float32([1, 0, 0]), 512)
@@ -207,7 +170,7 @@ def test_sphere_seen_in_a_glossy_reflection():
 def test_grid_guiding_agrees_and_lowers_the_error():
     """Area-light shadow: grid guiding must agree with finite differences and, at equal boundary
     samples, beat uniform sampling of the boundary sample space."""
-    scene = limn.load_dict(shadow_scene(AREA))
+    scene = load(shadow_scene(AREA))
     name = "box.vertex_positions"
     t = np.zeros_like(scene.params[name])
     t[:, 0] = 1.0
