@@ -9,13 +9,14 @@ and at the end, and Esc cancels, keeping the last state. In background mode the 
 same loop blocking and prints progress."""
 from __future__ import annotations
 
+import threading
 import time
 
 import bpy
 import numpy as np
 
 from . import exporter
-from .render_ops import _limn, end_worker, start_worker
+from .render_ops import _limn, end_worker, start_modal
 
 
 def _target_pixels(target, width: int, height: int, limn) -> np.ndarray:
@@ -93,6 +94,62 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
     return {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled}
 
 
+class OptimizeJob:
+    """The background optimisation behind the modal operator. start() runs limn.optim.fit on a
+    worker thread (which never touches bpy); poll(), on the main thread, reports progress and
+    writes the latest vertices into the mesh every `write_every` iterations and when the run ends;
+    cancel() stops after the current iteration, keeping the last state."""
+
+    def __init__(self, problem: Problem, iterations: int, spp: int, lr: float, lambda_: float, write_every: int = 5):
+        self.problem, self.iterations, self.write_every = problem, iterations, write_every
+        self._settings = (spp, lr, lambda_)
+        self._lock = threading.Lock()
+        self._state = {"it": -1, "loss": float("nan"), "x": None, "done": False, "error": None}
+        self._cancel = False
+        self._written = -1
+        self.writes = 0  # how often poll() wrote the mesh (progress shown in the viewport)
+        self._thread = None
+
+    def start(self) -> None:
+        spp, lr, lambda_ = self._settings
+        state, problem = self._state, self.problem
+
+        def callback(it, loss, x):
+            with self._lock:
+                state["it"], state["loss"], state["x"] = it, loss, x.copy()
+            return not self._cancel
+
+        def work():
+            try:
+                problem.limn.optim.fit(problem.views, problem.name, iterations=self.iterations, spp=spp, lr=lr,
+                                       lambda_=lambda_, faces=problem.faces, callback=callback)
+                with self._lock:
+                    state["x"] = problem.views[0][0].params[problem.name].copy()
+            except Exception as e:  # reported by poll() on the main thread
+                state["error"] = e
+            state["done"] = True
+
+        self._thread = threading.Thread(target=work, daemon=True)
+        self._thread.start()
+
+    def cancel(self) -> None:
+        self._cancel = True
+
+    def poll(self) -> dict:
+        """{"status": "running" | "finished" | "cancelled" | "error", "iteration", "loss", "message"}."""
+        with self._lock:
+            it, loss, x, done, error = (self._state[k] for k in ("it", "loss", "x", "done", "error"))
+        if x is not None and (done or it - self._written >= self.write_every):
+            self.problem.write_back(x)
+            self._written = it
+            self.writes += 1
+        status = "running" if not done else ("error" if error is not None else ("cancelled" if self._cancel else "finished"))
+        message = (f"limn: {error}" if error is not None else
+                   f"limn: iteration {it + 1}/{self.iterations}, loss {loss:.6f}" +
+                   ("" if done else " (Esc to cancel)") + (", cancelled" if done and self._cancel else ""))
+        return {"status": status, "iteration": it, "loss": loss, "message": message}
+
+
 class LimnTarget(bpy.types.PropertyGroup):
     camera: bpy.props.PointerProperty(name="Camera", type=bpy.types.Object, poll=lambda self, o: o.type == "CAMERA")
     image: bpy.props.PointerProperty(name="Target", type=bpy.types.Image)
@@ -140,50 +197,29 @@ class LIMN_OT_optimize(bpy.types.Operator):
 
     def _start(self, context, s, targets):
         try:
-            self._problem = Problem(s.optimize_object, targets, s.spp)
+            problem = Problem(s.optimize_object, targets, s.spp)
         except (ValueError, RuntimeError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self._state = {"it": 0, "loss": float("nan"), "x": None, "cancel": False, "done": False, "error": None}
-        state, problem = self._state, self._problem
-        settings = (s.iterations, s.spp, s.learning_rate, s.large_steps_lambda)
-
-        def callback(it, loss, x):
-            state["it"], state["loss"], state["x"] = it, loss, x.copy()
-            return not state["cancel"]
-
-        def work():  # never touches bpy
-            try:
-                problem.limn.optim.fit(problem.views, problem.name, iterations=settings[0], spp=settings[1], lr=settings[2],
-                                       lambda_=settings[3], faces=problem.faces, callback=callback)
-                state["x"] = problem.views[0][0].params[problem.name].copy()
-            except Exception as e:
-                state["error"] = e
-            state["done"] = True
-
-        self._iterations = s.iterations
-        self._last_write = -1
-        return start_worker(self, context, work, 0.2)
+        self._job = OptimizeJob(problem, s.iterations, s.spp, s.learning_rate, s.large_steps_lambda)
+        self._job.start()
+        return start_modal(self, context, 0.2)
 
     def modal(self, context, event):
-        state = self._state
+        job = self._job
         if event.type == "ESC":
-            state["cancel"] = True
+            job.cancel()
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        context.window_manager.progress_update(int(100 * (state["it"] + 1) / self._iterations))
+        status = job.poll()
+        context.window_manager.progress_update(int(100 * (status["iteration"] + 1) / job.iterations))
         if context.area:
-            context.area.header_text_set(f"limn: iteration {state['it'] + 1}/{self._iterations}, loss {state['loss']:.6f} (Esc to cancel)")
-        if state["x"] is not None and state["it"] - self._last_write >= 5:  # show progress in the viewport
-            self._problem.write_back(state["x"])
-            self._last_write = state["it"]
-        if not state["done"]:
+            context.area.header_text_set(status["message"])
+        if status["status"] == "running":
             return {"RUNNING_MODAL"}
         end_worker(self, context)
-        if state["x"] is not None:
-            self._problem.write_back(state["x"])
-        if state["error"] is not None:
-            self.report({"ERROR"}, f"limn: {state['error']}")
+        if status["status"] == "error":
+            self.report({"ERROR"}, status["message"])
             return {"CANCELLED"}
-        self.report({"INFO"}, f"limn: optimisation {'cancelled' if state['cancel'] else 'finished'}, loss {state['loss']:.6f}")
+        self.report({"INFO"}, status["message"])
         return {"FINISHED"}

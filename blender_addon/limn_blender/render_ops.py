@@ -24,11 +24,9 @@ def _limn(context=None):
     return import_limn(getattr(prefs, "module_path", "") or None)
 
 
-def start_worker(operator, context, work, interval: float):
-    """Runs work() on a daemon thread (it must not touch bpy) and makes `operator` modal with a
-    timer and a progress bar; operator.modal() polls operator._thread."""
-    operator._thread = threading.Thread(target=work, daemon=True)
-    operator._thread.start()
+def start_modal(operator, context, interval: float):
+    """Makes `operator` modal with a timer every `interval` seconds and a progress bar; its modal()
+    polls the work it started on a thread of its own."""
     wm = context.window_manager
     operator._timer = wm.event_timer_add(interval, window=context.window)
     wm.progress_begin(0, 100)
@@ -37,7 +35,7 @@ def start_worker(operator, context, work, interval: float):
 
 
 def end_worker(operator, context) -> None:
-    """Undoes start_worker's timer, progress bar and header text."""
+    """Undoes start_modal's timer, progress bar and header text."""
     wm = context.window_manager
     wm.event_timer_remove(operator._timer)
     wm.progress_end()
@@ -128,7 +126,9 @@ class LIMN_OT_render(bpy.types.Operator):
             except Exception as e:  # reported on the main thread
                 state["error"] = e
 
-        return start_worker(self, context, work, 0.1)
+        self._thread = threading.Thread(target=work, daemon=True)  # never touches bpy
+        self._thread.start()
+        return start_modal(self, context, 0.1)
 
     def modal(self, context, event):
         if event.type == "ESC":

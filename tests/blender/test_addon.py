@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import time
 import os
 
 import bpy  # first: with the bpy module, addon_utils becomes importable only after bpy
@@ -200,6 +201,42 @@ def test_optimisation_moves_the_mesh_towards_the_target(addon, limn):
         t.camera, t.image = c, im
     s.iterations, s.spp = 3, 4
     assert bpy.ops.limn.optimize() == {"FINISHED"}
+
+    # The UI path: the modal operator polls an OptimizeJob on timer events (timers do not fire in
+    # -b mode, so the test polls it the same way). It writes the mesh while running and at the end,
+    # and a cancel keeps the last state.
+    Job = addon.optimize_ops.OptimizeJob
+    ball.data.vertices.foreach_set("co", original)
+    ball.data.update()
+    job = Job(addon.optimize_ops.Problem(ball, target_images, 8), iterations=12, spp=8, lr=0.03, lambda_=5.0, write_every=2)
+    job.start()
+    seen = []
+    while True:
+        status = job.poll()
+        seen.append(status["status"])
+        if status["status"] != "running":
+            break
+        time.sleep(0.02)
+    assert status["status"] == "finished", status
+    assert status["iteration"] == 11 and "iteration 12/12" in status["message"]
+    assert job.writes >= 3, job.writes  # during the run and at the end
+    final = np.empty_like(original)
+    ball.data.vertices.foreach_get("co", final)
+    assert np.linalg.norm(final.reshape(-1, 3), axis=1).mean() > r0 * 1.02
+
+    ball.data.vertices.foreach_set("co", original)
+    ball.data.update()
+    job = Job(addon.optimize_ops.Problem(ball, target_images, 8), iterations=200, spp=8, lr=0.03, lambda_=5.0)
+    job.start()
+    while job.poll()["iteration"] < 2:
+        time.sleep(0.02)
+    job.cancel()
+    while (status := job.poll())["status"] == "running":
+        time.sleep(0.02)
+    assert status["status"] == "cancelled" and status["iteration"] < 199, status
+    moved = np.empty_like(original)
+    ball.data.vertices.foreach_get("co", moved)
+    assert not np.allclose(moved, original)  # the last good state was written back
 
 
 def test_optimise_operator_reports_bad_input(addon):
