@@ -12,8 +12,7 @@ namespace limn {
 BoundaryGrid::BoundaryGrid(std::array<int, 3> res, int spc, uint64_t seed, int threads,
                            const std::function<float(const Vec3&)>& integrand, float defensive)
     : m_res(res) {
-  for (int r : res)
-    if (r < 1 || r > 4096) throw std::invalid_argument("grid guiding: resolution must be in [1, 4096] (got " + std::to_string(r) + ")");
+  check_resolution(res);
   if (spc < 1) throw std::invalid_argument("grid guiding: guiding_spp must be >= 1 (got " + std::to_string(spc) + ")");
   const size_t n = size_t(res[0]) * res[1] * res[2];
   std::vector<float> mass(n, 0.0f);
@@ -33,6 +32,25 @@ BoundaryGrid::BoundaryGrid(std::array<int, 3> res, int spc, uint64_t seed, int t
       }
     });
   });
+  finish(mass, defensive);
+}
+
+BoundaryGrid::BoundaryGrid(std::array<int, 3> res, const std::vector<Vec3>& points, const std::vector<float>& values, float defensive)
+    : m_res(res), m_projective(true) {
+  check_resolution(res);
+  std::vector<float> mass(size_t(res[0]) * res[1] * res[2], 0.0f);
+  for (size_t i = 0; i < points.size() && i < values.size(); ++i)
+    if (std::isfinite(values[i]) && values[i] > 0.0f) mass[cell_of(points[i])] += values[i];
+  finish(mass, defensive);
+}
+
+void BoundaryGrid::check_resolution(const std::array<int, 3>& res) {
+  for (int r : res)
+    if (r < 1 || r > 4096) throw std::invalid_argument("grid guiding: resolution must be in [1, 4096] (got " + std::to_string(r) + ")");
+}
+
+void BoundaryGrid::finish(const std::vector<float>& mass, float defensive) {
+  const size_t n = mass.size();
   double total = 0;
   for (float m : mass) {
     total += m;
@@ -43,8 +61,13 @@ BoundaryGrid::BoundaryGrid(std::array<int, 3> res, int spc, uint64_t seed, int t
   for (size_t c = 0; c < n; ++c)
     m_mass[c] = total > 0.0 ? float((1.0 - defensive) * mass[c] / total + defensive / double(n)) : float(1.0 / double(n));
   m_cells = Distribution1D(m_mass);
-  m_first.assign(res[0], 0.0f);
-  for (size_t c = 0; c < n; ++c) m_first[c / (size_t(res[1]) * res[2])] += m_cells.pmf(c);
+  m_first.assign(m_res[0], 0.0f);
+  for (size_t c = 0; c < n; ++c) m_first[c / (size_t(m_res[1]) * m_res[2])] += m_cells.pmf(c);
+}
+
+std::string BoundaryGrid::describe() const {
+  return std::string(m_projective ? "projective grid " : "grid ") + std::to_string(m_res[0]) + "x" + std::to_string(m_res[1]) + "x" +
+         std::to_string(m_res[2]) + " (" + std::to_string(m_empty) + " of " + std::to_string(m_mass.size()) + " cells empty)";
 }
 
 size_t BoundaryGrid::cell_of(const Vec3& p) const {
@@ -58,10 +81,12 @@ Vec3 BoundaryGrid::sample(const Vec3& u, float* pdf) const {
   size_t c;
   const float f = m_cells.sample_remapped(u.x, &c);
   const int i0 = int(c / (size_t(m_res[1]) * m_res[2])), i1 = int((c / m_res[2]) % m_res[1]), i2 = int(c % m_res[2]);
-  // Inside the cell: the remapped first number for axis 0, the other two for axes 1 and 2.
-  const Vec3 p((i0 + f) / m_res[0], (i1 + u.y) / m_res[1], (i2 + u.z) / m_res[2]);
+  // Inside the cell: the remapped first number for axis 0, the other two for axes 1 and 2, kept
+  // below the cell's far face (i + f rounds up to i + 1 for f close to 1).
+  auto inside = [](int i, float f, int res) { return std::min((i + f) / res, std::nextafter(float(i + 1) / res, 0.0f)); };
+  const Vec3 p(inside(i0, f, m_res[0]), inside(i1, u.y, m_res[1]), inside(i2, u.z, m_res[2]));
   *pdf = m_cells.pmf(c) * float(m_mass.size());
-  return glm::min(p, Vec3(1.0f - 1e-7f));
+  return p;
 }
 
 float BoundaryGrid::pdf(const Vec3& p) const { return m_cells.pmf(cell_of(p)) * float(m_mass.size()); }

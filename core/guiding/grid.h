@@ -1,35 +1,44 @@
-// Uniform grid guiding over a 3D boundary sample space [0,1)^3 (the path-space baseline of the
-// projective-sampling paper, section 5.1.1, without projection): every cell's mass is estimated
-// from `samples_per_cell` random points, cells are then sampled in proportion to it, mixed with a
-// defensive uniform component so that no region has zero probability (the estimate stays
-// unbiased wherever the integrand is non-zero).
+// Uniform grid guiding over the boundary sample space [0,1)^3 (projective-sampling paper, section
+// 5.1.1). Two ways to fill it: the path-space baseline estimates every cell's mass from
+// `samples_per_cell` random points; the projective grid accumulates the integrand at projected
+// samples (points found by projecting path segments onto silhouettes) into their cells. Cells are
+// sampled in proportion to their mass, mixed with a defensive uniform component.
 #pragma once
 #include <array>
 #include <cstdint>
 #include <functional>
+#include "core/guiding/guide.h"
 #include "core/math/distribution.h"
-#include "core/math/vec.h"
 
 namespace limn {
 
-class BoundaryGrid {
+class BoundaryGrid : public BoundaryGuide {
  public:
-  // integrand(u) >= 0 at a point of [0,1)^3; called from several threads at once.
+  // Baseline: integrand(u) >= 0 at a point of [0,1)^3; called from several threads at once.
   BoundaryGrid(std::array<int, 3> resolution, int samples_per_cell, uint64_t seed, int threads,
                const std::function<float(const Vec3&)>& integrand, float defensive = 0.1f);
+  // Projective: the integrand's values at projected points accumulate into their cells.
+  BoundaryGrid(std::array<int, 3> resolution, const std::vector<Vec3>& points, const std::vector<float>& values,
+               float defensive = 0.1f);
 
-  // A point of [0,1)^3 from three uniform numbers, and its density with respect to [0,1)^3.
-  Vec3 sample(const Vec3& u, float* pdf) const;
-  float pdf(const Vec3& p) const;
-  // Density of the first coordinate alone (for terms that only use it).
-  float pdf_first(float p0) const;
+  Vec3 sample(const Vec3& u, float* pdf) const override;
+  float pdf(const Vec3& p) const override;
+  float pdf_first(float p0) const override;
+  size_t memory_bytes() const override { return m_mass.size() * 2 * sizeof(float) + m_cells.size() * sizeof(double); }
+  std::string describe() const override;
+  size_t region_count() const override { return m_mass.size(); }
+  size_t region_of(const Vec3& p) const override { return cell_of(p); }
+  double region_probability(size_t c) const override { return m_cells.pmf(c); }
 
   size_t cell_count() const { return m_mass.size(); }
   size_t empty_cells() const { return m_empty; }
 
  private:
+  static void check_resolution(const std::array<int, 3>& res);
+  void finish(const std::vector<float>& mass, float defensive);
   size_t cell_of(const Vec3& p) const;
   std::array<int, 3> m_res;
+  bool m_projective = false;
   std::vector<float> m_mass;     // mixture probability of each cell
   std::vector<float> m_first;    // marginal probability of each slice along the first axis
   Distribution1D m_cells;

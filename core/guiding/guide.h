@@ -1,0 +1,29 @@
+// A guiding distribution over the boundary sample space [0,1)^3 (projective-sampling paper,
+// section 5.1): a mixture with a defensive uniform component, so that every region keeps a
+// non-zero density and the boundary estimate stays unbiased wherever the integrand is non-zero.
+#pragma once
+#include <cstddef>
+#include <string>
+#include "core/math/vec.h"
+
+namespace limn {
+
+class BoundaryGuide {
+ public:
+  virtual ~BoundaryGuide() = default;
+  // A point of [0,1)^3 from three uniform numbers, and its density with respect to [0,1)^3.
+  virtual Vec3 sample(const Vec3& u, float* pdf) const = 0;
+  virtual float pdf(const Vec3& p) const = 0;
+  // Density of the first coordinate alone (for terms that only use it).
+  virtual float pdf_first(float p0) const = 0;
+  virtual size_t memory_bytes() const = 0;
+  // The guide is piecewise constant over regions (cells, leaves): their number, the region that
+  // holds p, and each one's probability (tests compare sampling frequencies with them).
+  virtual size_t region_count() const = 0;
+  virtual size_t region_of(const Vec3& p) const = 0;
+  virtual double region_probability(size_t region) const = 0;
+  // One line for the run's summary: cells or leaves, empty ones, coarsening.
+  virtual std::string describe() const = 0;
+};
+
+}  // namespace limn

@@ -1,0 +1,164 @@
+#include "core/guiding/octree.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+#include <deque>
+#include <stdexcept>
+#include <string>
+#include "core/math/rng.h"
+
+namespace limn {
+
+BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& opt, uint64_t seed, int threads,
+                               const std::function<float(const Vec3&)>& integrand)
+    : m_opt(opt) {
+  if (opt.slices < 1 || opt.slices > 1 << 16) throw std::invalid_argument("octree guiding: slices must be in [1, 65536] (got " + std::to_string(opt.slices) + ")");
+  if (opt.max_depth < 0 || opt.max_depth > 12) throw std::invalid_argument("octree guiding: max_depth must be in [0, 12] (got " + std::to_string(opt.max_depth) + ")");
+  if (opt.leaf_samples < 1) throw std::invalid_argument("octree guiding: leaf_samples must be >= 1 (got " + std::to_string(opt.leaf_samples) + ")");
+  if (opt.max_leaves < size_t(opt.slices)) throw std::invalid_argument("octree guiding: max_leaves must be >= slices");
+
+  // Bottom-up partition, breadth first so that a leaf budget coarsens evenly.
+  struct Pending {
+    int node, depth;
+    Vec3 lo, size;
+    std::vector<uint32_t> idx;
+  };
+  const int S = opt.slices;
+  m_nodes.resize(size_t(S));
+  std::deque<Pending> queue;
+  std::vector<std::vector<uint32_t>> by_slice(static_cast<size_t>(S));
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Vec3& p = points[i];
+    if (!(p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f && p.z >= 0.0f && p.z < 1.0f)) continue;
+    by_slice[size_t(std::min(int(p.x * S), S - 1))].push_back(uint32_t(i));
+  }
+  for (int s = 0; s < S; ++s) queue.push_back({s, 0, Vec3(float(s) / S, 0.0f, 0.0f), Vec3(1.0f / S, 1.0f, 1.0f), std::move(by_slice[size_t(s)])});
+  size_t leaves = size_t(S);
+  int deepest = 0;
+  std::vector<std::pair<int, Leaf>> leaf_nodes;
+  while (!queue.empty()) {
+    Pending n = std::move(queue.front());
+    queue.pop_front();
+    const bool split = n.idx.size() > 1 && n.depth < opt.max_depth;
+    if (split && leaves + 7 > opt.max_leaves) m_coarsened = true;
+    if (!split || leaves + 7 > opt.max_leaves) {
+      leaf_nodes.push_back({n.node, Leaf{n.lo, n.size}});
+      deepest = std::max(deepest, n.depth);
+      continue;
+    }
+    leaves += 7;
+    const int first = int(m_nodes.size());
+    m_nodes[size_t(n.node)].child = first;
+    m_nodes.resize(m_nodes.size() + 8);
+    const Vec3 half = 0.5f * n.size, mid = n.lo + half;
+    std::vector<uint32_t> parts[8];
+    for (uint32_t i : n.idx) {
+      const Vec3& p = points[i];
+      parts[(p.x >= mid.x ? 1 : 0) | (p.y >= mid.y ? 2 : 0) | (p.z >= mid.z ? 4 : 0)].push_back(i);
+    }
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 lo(c & 1 ? mid.x : n.lo.x, c & 2 ? mid.y : n.lo.y, c & 4 ? mid.z : n.lo.z);
+      queue.push_back({first + c, n.depth + 1, lo, half, std::move(parts[c])});
+    }
+  }
+  m_leaves.reserve(leaf_nodes.size());
+  for (auto& [node, leaf] : leaf_nodes) {
+    m_nodes[size_t(node)].leaf = int(m_leaves.size());
+    m_leaves.push_back(leaf);
+  }
+
+  // Leaf masses from uniform points inside each leaf.
+  std::vector<double> mass(m_leaves.size(), 0.0);
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m_leaves.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t l = r.begin(); l != r.end(); ++l) {
+        Pcg32 rng = pixel_rng(mix_bits(seed ^ 0x6f63747265650aULL), l);
+        const Leaf& leaf = m_leaves[l];
+        double sum = 0.0;
+        for (int s = 0; s < opt.leaf_samples; ++s) {
+          const Vec3 p = leaf.lo + leaf.size * Vec3(rng.next_float(), rng.next_float(), rng.next_float());
+          const float f = integrand(glm::min(p, Vec3(1.0f - 1e-7f)));
+          if (std::isfinite(f) && f > 0.0f) sum += f;
+        }
+        mass[l] = sum / opt.leaf_samples * double(leaf.size.x) * leaf.size.y * leaf.size.z;
+      }
+    });
+  });
+  double total = 0.0;
+  for (double m : mass) {
+    total += m;
+    m_empty += m == 0.0;
+  }
+  m_prob.resize(m_leaves.size());
+  for (size_t l = 0; l < m_leaves.size(); ++l) {
+    const double volume = double(m_leaves[l].size.x) * m_leaves[l].size.y * m_leaves[l].size.z;
+    m_prob[l] = float(total > 0.0 ? (1.0 - opt.defensive) * mass[l] / total + opt.defensive * volume : volume);
+  }
+  m_select = Distribution1D(m_prob);
+
+  // Marginal density of the first coordinate on the finest slab subdivision (a difference array:
+  // every leaf adds prob / width over the bins it spans).
+  const size_t bins = size_t(S) << deepest;
+  std::vector<double> diff(bins + 1, 0.0);
+  for (size_t l = 0; l < m_leaves.size(); ++l) {
+    const size_t b0 = size_t(std::llround(double(m_leaves[l].lo.x) * bins));
+    const size_t b1 = std::min(bins, b0 + std::max<size_t>(1, size_t(std::llround(double(m_leaves[l].size.x) * bins))));
+    const double density = m_select.pmf(l) / double(m_leaves[l].size.x);
+    diff[b0] += density;
+    diff[b1] -= density;
+  }
+  m_first.resize(bins);
+  double run = 0.0;
+  for (size_t b = 0; b < bins; ++b) m_first[b] = float(run += diff[b]);
+}
+
+int BoundaryOctree::leaf_at(const Vec3& p) const {
+  const int S = m_opt.slices;
+  int node = std::clamp(int(p.x * S), 0, S - 1);
+  Vec3 lo(float(node) / S, 0.0f, 0.0f), size(1.0f / S, 1.0f, 1.0f);
+  while (m_nodes[size_t(node)].child >= 0) {
+    size *= 0.5f;
+    const Vec3 mid = lo + size;
+    const int c = (p.x >= mid.x ? 1 : 0) | (p.y >= mid.y ? 2 : 0) | (p.z >= mid.z ? 4 : 0);
+    lo = Vec3(c & 1 ? mid.x : lo.x, c & 2 ? mid.y : lo.y, c & 4 ? mid.z : lo.z);
+    node = m_nodes[size_t(node)].child + c;
+  }
+  return m_nodes[size_t(node)].leaf;
+}
+
+Vec3 BoundaryOctree::sample(const Vec3& u, float* pdf) const {
+  size_t l;
+  const float f = m_select.sample_remapped(u.x, &l);
+  const Leaf& leaf = m_leaves[l];
+  const Vec3 p = glm::min(leaf.lo + leaf.size * Vec3(f, u.y, u.z), Vec3(1.0f - 1e-7f));
+  // The density of the leaf that holds p (rounding at a leaf's far face can land in the next one).
+  *pdf = this->pdf(p);
+  return p;
+}
+
+float BoundaryOctree::pdf(const Vec3& p) const {
+  const int l = leaf_at(p);
+  const Leaf& leaf = m_leaves[size_t(l)];
+  return m_select.pmf(size_t(l)) / (leaf.size.x * leaf.size.y * leaf.size.z);
+}
+
+float BoundaryOctree::pdf_first(float p0) const {
+  const size_t b = std::min(m_first.size() - 1, size_t(std::max(p0, 0.0f) * m_first.size()));
+  return m_first[b];
+}
+
+size_t BoundaryOctree::memory_bytes() const {
+  return m_nodes.size() * sizeof(Node) + m_leaves.size() * (sizeof(Leaf) + sizeof(float) + sizeof(float) + sizeof(double)) +
+         m_first.size() * sizeof(float);
+}
+
+std::string BoundaryOctree::describe() const {
+  return "octree " + std::to_string(m_opt.slices) + " slices, " + std::to_string(m_leaves.size()) + " leaves (" +
+         std::to_string(m_empty) + " empty), depth <= " + std::to_string(m_opt.max_depth) + ", " +
+         std::to_string(m_opt.leaf_samples) + " uniform samples per leaf" +
+         (m_coarsened ? ", COARSENED at the leaf budget (max_leaves " + std::to_string(m_opt.max_leaves) + ")" : "");
+}
+
+}  // namespace limn

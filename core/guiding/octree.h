@@ -1,0 +1,66 @@
+// Hierarchical guiding (projective-sampling paper, section 5.1.2): the first axis of the boundary
+// sample space is pre-split into `slices` equal slabs (heterogeneity across edges, shapes and
+// their concatenation); each slab is an octree built bottom-up from projected samples, splitting a
+// node 8 ways while it holds more than one sample and is shallower than `max_depth`. Every leaf's
+// mass is then estimated from `leaf_samples` uniform points inside it (no projections needed),
+// and leaves are sampled in proportion to it, mixed with a defensive uniform component.
+//
+// Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
+// (coarsened(), said in the summary), never dropping samples or the boundary term.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <vector>
+#include "core/guiding/guide.h"
+#include "core/math/distribution.h"
+
+namespace limn {
+
+struct OctreeOptions {
+  int slices = 100;          // the paper's 100 trees along the first axis
+  int max_depth = 9;         // the paper's maximum depth
+  int leaf_samples = 32;     // the paper's uniform samples per leaf
+  size_t max_leaves = 1u << 20;
+  float defensive = 0.1f;
+};
+
+class BoundaryOctree : public BoundaryGuide {
+ public:
+  // integrand(u) >= 0; called from several threads at once.
+  BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& options, uint64_t seed, int threads,
+                 const std::function<float(const Vec3&)>& integrand);
+
+  Vec3 sample(const Vec3& u, float* pdf) const override;
+  float pdf(const Vec3& p) const override;
+  float pdf_first(float p0) const override;
+  size_t memory_bytes() const override;
+  std::string describe() const override;
+  size_t region_count() const override { return m_leaves.size(); }
+  size_t region_of(const Vec3& p) const override { return size_t(leaf_at(p)); }
+  double region_probability(size_t l) const override { return m_select.pmf(l); }
+
+  size_t leaf_count() const { return m_leaves.size(); }
+  size_t empty_leaves() const { return m_empty; }
+  bool coarsened() const { return m_coarsened; }
+
+ private:
+  struct Node {
+    int child = -1;  // first of 8 children, -1 for a leaf
+    int leaf = -1;   // index into m_leaves for leaves
+  };
+  struct Leaf {
+    Vec3 lo, size;
+  };
+  int leaf_at(const Vec3& p) const;
+
+  OctreeOptions m_opt;
+  std::vector<Node> m_nodes;       // the first `slices` nodes are the slab roots
+  std::vector<Leaf> m_leaves;
+  std::vector<float> m_prob;       // mixture probability of each leaf
+  Distribution1D m_select;
+  std::vector<float> m_first;      // density of the first coordinate on a fine regular grid
+  size_t m_empty = 0;
+  bool m_coarsened = false;
+};
+
+}  // namespace limn

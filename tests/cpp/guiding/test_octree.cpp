@@ -1,0 +1,125 @@
+// Octree and projective-grid guiding: densities integrate to 1, sampling frequencies match them
+// (chi-square), the defensive component reaches every region, and the leaf budget coarsens.
+#include <doctest/doctest.h>
+
+#include "core/guiding/grid.h"
+#include "core/guiding/octree.h"
+#include "core/math/rng.h"
+
+using namespace limn;
+
+namespace {
+
+// A sparse integrand: a thin slab and a small ball, where projected points would concentrate.
+float sparse(const Vec3& u) {
+  const float slab = std::abs(u.x - 0.31f) < 0.004f && u.y < 0.5f ? 40.0f : 0.0f;
+  const float ball = glm::length(u - Vec3(0.72f, 0.6f, 0.3f)) < 0.05f ? 10.0f : 0.0f;
+  return slab + ball;
+}
+
+std::vector<Vec3> projected_points(int n, Pcg32& rng) {
+  std::vector<Vec3> p;
+  while (int(p.size()) < n) {
+    const Vec3 u(rng.next_float(), rng.next_float(), rng.next_float());
+    if (sparse(u) > 0.0f) p.push_back(u);
+  }
+  return p;
+}
+
+// Chi-square statistic of `n` samples against the guide's region probabilities (exact for these
+// piecewise-constant guides); regions expected to get fewer than 5 samples are pooled. Returns the
+// statistic and the 99.9 % quantile for its degrees of freedom (Wilson-Hilferty).
+std::pair<double, double> chi_square(const BoundaryGuide& g, int n, Pcg32& rng) {
+  std::vector<double> observed(g.region_count(), 0.0);
+  for (int i = 0; i < n; ++i) {
+    float pdf;
+    const Vec3 p = g.sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf);
+    CHECK(pdf == doctest::Approx(g.pdf(p)).epsilon(1e-4));
+    observed[g.region_of(p)] += 1.0;
+  }
+  double chi = 0.0, pooled_obs = 0.0, pooled_exp = 0.0;
+  int dof = -1;
+  for (size_t r = 0; r < observed.size(); ++r) {
+    const double e = n * g.region_probability(r);
+    if (e < 5.0) {
+      pooled_obs += observed[r];
+      pooled_exp += e;
+      continue;
+    }
+    chi += (observed[r] - e) * (observed[r] - e) / e;
+    ++dof;
+  }
+  if (pooled_exp > 0.0) {
+    chi += (pooled_obs - pooled_exp) * (pooled_obs - pooled_exp) / pooled_exp;
+    ++dof;
+  }
+  const double k = std::max(dof, 1);
+  return {chi, k * std::pow(1.0 - 2.0 / (9.0 * k) + 3.09 * std::sqrt(2.0 / (9.0 * k)), 3.0)};
+}
+
+double mean_pdf(const BoundaryGuide& g, Pcg32& rng, int n) {
+  double s = 0.0;
+  for (int i = 0; i < n; ++i) s += g.pdf(Vec3(rng.next_float(), rng.next_float(), rng.next_float()));
+  return s / n;
+}
+
+}  // namespace
+
+TEST_CASE("octree guiding: pdf integrates to 1, samples follow it, defensive mass everywhere") {
+  Pcg32 rng(3);
+  const auto pts = projected_points(3000, rng);
+  OctreeOptions opt;
+  opt.slices = 16;
+  opt.max_depth = 7;
+  opt.leaf_samples = 8;
+  const BoundaryOctree tree(pts, opt, 5, 0, sparse);
+  CHECK(tree.leaf_count() > 1000);
+  CHECK(!tree.coarsened());
+  CHECK(mean_pdf(tree, rng, 400000) == doctest::Approx(1.0).epsilon(0.03));
+  double first = 0.0;
+  for (int i = 0; i < 200000; ++i) first += tree.pdf_first(rng.next_float());
+  CHECK(first / 200000 == doctest::Approx(1.0).epsilon(0.02));
+  const auto [chi, q] = chi_square(tree, 200000, rng);
+  CHECK(chi < q);
+  // Most samples land on the sparse features; an empty region keeps the defensive density.
+  int hits = 0;
+  for (int i = 0; i < 20000; ++i) {
+    float pdf;
+    hits += sparse(tree.sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf)) > 0.0f;
+  }
+  CHECK(hits > 0.7 * 20000);
+  CHECK(tree.pdf(Vec3(0.05f, 0.95f, 0.95f)) == doctest::Approx(0.1).epsilon(1e-3));
+  CHECK(tree.memory_bytes() > 0);
+}
+
+TEST_CASE("octree guiding: a leaf budget coarsens instead of dropping anything") {
+  Pcg32 rng(4);
+  const auto pts = projected_points(3000, rng);
+  OctreeOptions opt;
+  opt.slices = 8;
+  opt.max_leaves = 200;
+  opt.leaf_samples = 4;
+  const BoundaryOctree tree(pts, opt, 5, 0, sparse);
+  CHECK(tree.coarsened());
+  CHECK(tree.leaf_count() <= 200);
+  CHECK(tree.describe().find("COARSENED") != std::string::npos);
+  CHECK(mean_pdf(tree, rng, 200000) == doctest::Approx(1.0).epsilon(0.03));
+  // No projected points at all: the tree is the slabs, sampled by their estimated mass.
+  const BoundaryOctree empty({}, opt, 5, 0, sparse);
+  CHECK(empty.leaf_count() == 8);
+  CHECK(mean_pdf(empty, rng, 100000) == doctest::Approx(1.0).epsilon(0.03));
+  CHECK_THROWS_AS(BoundaryOctree(pts, OctreeOptions{0, 9, 32, 1u << 20, 0.1f}, 1, 0, sparse), std::invalid_argument);
+}
+
+TEST_CASE("projective grid: values at projected points fill the cells") {
+  Pcg32 rng(6);
+  const auto pts = projected_points(5000, rng);
+  std::vector<float> values;
+  for (const Vec3& p : pts) values.push_back(sparse(p));
+  const BoundaryGrid grid({64, 8, 8}, pts, values);
+  CHECK(mean_pdf(grid, rng, 200000) == doctest::Approx(1.0).epsilon(0.02));
+  const auto [chi, q] = chi_square(grid, 200000, rng);
+  CHECK(chi < q);
+  CHECK(grid.empty_cells() > grid.cell_count() / 2);
+  CHECK(grid.describe().find("projective grid") == 0);
+}
