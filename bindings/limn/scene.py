@@ -115,12 +115,22 @@ class Scene:
     def differentiable(self) -> list[str]:
         return list(self._differentiable)
 
-    def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, guiding, grid_resolution, guiding_spp,
-                      max_depth, threads) -> dict:
+    # Derivative options and their defaults (render_forward / render_backward keyword arguments).
+    DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 32, "guiding_spp": 4,
+                    "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
+                    "max_depth": None, "threads": 0}
+
+    def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
         if not self._differentiable:
             raise ValueError(f"{self._native.source}: no differentiable parameters; call set_differentiable() first")
-        if guiding not in ("none", "grid"):
-            raise ValueError(f"guiding must be 'none' or 'grid' (got '{guiding}'); projective sampling and octrees are not implemented yet")
+        unknown = set(options) - set(self.DIFF_OPTIONS)
+        if unknown:
+            raise TypeError(f"unknown derivative option(s) {sorted(unknown)}; known: {sorted(self.DIFF_OPTIONS)}")
+        opts = dict(self.DIFF_OPTIONS, **options)
+        if opts["guiding"] not in ("none", "grid", "octree"):
+            raise ValueError(f"guiding must be 'none', 'grid' or 'octree' (got '{opts['guiding']}')")
+        if opts["project_seed"] not in ("bsdf", "emitter", "both"):
+            raise ValueError(f"project_seed must be 'bsdf', 'emitter' or 'both' (got '{opts['project_seed']}')")
         if seed < 0:
             raise ValueError(f"seed must be >= 0 (got {seed})")
         interior = spp_interior if spp_interior is not None else (spp or self.spp)
@@ -129,12 +139,12 @@ class Scene:
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
-        if grid_resolution < 1 or guiding_spp < 1:
-            raise ValueError(f"grid_resolution and guiding_spp must be >= 1 (got {grid_resolution}, {guiding_spp})")
+        for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples"):
+            if int(opts[name]) < 1:
+                raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
         self.update()
-        return {"spp_interior": interior, "spp_primary": spp_primary, "spp_boundary": spp_boundary, "seed": seed,
-                "threads": threads, "guiding": guiding, "grid_resolution": grid_resolution, "guiding_spp": guiding_spp,
-                "max_depth": max_depth}
+        opts.update(spp_interior=interior, spp_primary=spp_primary, spp_boundary=spp_boundary, seed=seed)
+        return opts
 
     def _report(self, stats: dict) -> None:
         self.last_stats = stats
@@ -146,23 +156,34 @@ class Scene:
                 warnings.warn(f"{self._native.source}: {line}", stacklevel=3)
 
     def render_forward(self, tangents: dict, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
-                       spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none",
-                       grid_resolution: int = 32, guiding_spp: int = 4, max_depth: int | None = None, threads: int = 0,
-                       progress=None) -> np.ndarray:
+                       spp_primary: int | None = None, spp_boundary: int | None = None, progress=None,
+                       **options) -> np.ndarray:
         """Derivative image d(image)/d(theta) along ``tangents`` ({name: array shaped like the
         parameter}; differentiable parameters that are not listed get a zero tangent).
 
         Terms: the interior term (``spp_interior`` paths per pixel, default ``spp`` or the scene's
-        sampler) and the primary-visibility boundary term for silhouettes seen directly
+        sampler), the primary-visibility boundary term for silhouettes seen directly
         (``spp_primary`` samples per pixel on average, default the same; 0 switches it off), and the
         indirect boundary term for mesh edges and sphere surfaces: shadows and silhouettes seen in
-        reflections (``spp_boundary``, default the same; ``guiding="none"`` samples the boundary
-        sample space uniformly, ``"grid"`` guides it with a uniform grid of ``grid_resolution``
-        cells along the first axis (and R/4 x R/2 over the others) filled with ``guiding_spp``
-        points per cell). ``max_depth`` overrides the path integrator's longest path for every
-        term. ``last_stats["summary"]`` lists what was computed and what was skipped."""
-        options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, guiding, grid_resolution, guiding_spp,
-                                     max_depth, threads)
+        reflections (``spp_boundary``, default the same).
+
+        Options (keyword arguments, defaults in ``Scene.DIFF_OPTIONS``):
+
+        - ``guiding``: ``"none"`` samples the boundary sample space uniformly; ``"grid"`` uses a
+          uniform grid of ``grid_resolution`` cells along the first axis (and R/4 x R/2 over the
+          others); ``"octree"`` an adaptive octree (``octree_slices`` slabs along the first axis,
+          depth <= ``octree_max_depth``, ``octree_leaf_samples`` uniform samples per leaf, at most
+          ``octree_max_leaves`` leaves: beyond that it coarsens and the summary says so).
+        - ``projective`` (grid): fill the grid from projected seeds (True) or from
+          ``guiding_spp`` random points per cell (False, the path-space baseline).
+        - ``guiding_spp``: projective guides trace ``guiding_spp`` seed paths per pixel, whose
+          segments (``project_seed``: ``"bsdf"``, ``"emitter"`` or ``"both"``) are projected onto
+          silhouettes.
+        - ``max_depth`` overrides the path integrator's longest path for every term;
+          ``threads`` (0: all cores).
+
+        ``last_stats["summary"]`` lists what was computed and what was skipped."""
+        options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, options)
         for n in tangents:
             if n not in self._differentiable:
                 raise ValueError(f"tangent given for '{n}', which is not differentiable (differentiable: {self._differentiable})")
@@ -185,14 +206,12 @@ class Scene:
         return self._native.faces(shape_id)
 
     def render_backward(self, adjoint, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,
-                        spp_primary: int | None = None, spp_boundary: int | None = None, guiding: str = "none",
-                        grid_resolution: int = 32, guiding_spp: int = 4, max_depth: int | None = None, threads: int = 0,
-                        progress=None) -> dict:
+                        spp_primary: int | None = None, spp_boundary: int | None = None, progress=None,
+                        **options) -> dict:
         """Gradient of sum(adjoint * image) for every differentiable parameter, as {name: array
         shaped like the parameter}. ``adjoint`` is a (H, W, 3) array, e.g. dLoss/dImage.
         Same terms and caveats as :meth:`render_forward`."""
-        options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, guiding, grid_resolution, guiding_spp,
-                                     max_depth, threads)
+        options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, options)
         a = np.asarray(adjoint, dtype=np.float32)
         if a.shape != (self.height, self.width, 3):
             raise ValueError(f"adjoint must have shape {(self.height, self.width, 3)}, got {a.shape}")

@@ -92,6 +92,12 @@ DiffOptions diff_options(const py::dict& options) {
     else if (k == "grid_resolution") o.grid_resolution = value.cast<int>();
     else if (k == "guiding_spp") o.guiding_spp = value.cast<int>();
     else if (k == "max_depth") o.max_depth = value.is_none() ? kSceneMaxDepth : value.cast<int>();
+    else if (k == "projective") o.projective = value.cast<bool>();
+    else if (k == "project_seed") o.project_seed = value.cast<std::string>();
+    else if (k == "octree_slices") o.octree.slices = value.cast<int>();
+    else if (k == "octree_max_depth") o.octree.max_depth = value.cast<int>();
+    else if (k == "octree_leaf_samples") o.octree.leaf_samples = value.cast<int>();
+    else if (k == "octree_max_leaves") o.octree.max_leaves = value.cast<size_t>();
     else throw std::invalid_argument("unknown derivative option '" + k + "'");
   }
   return o;

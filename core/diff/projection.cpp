@@ -114,7 +114,7 @@ std::optional<Projection> Projector::project(const Vec3& xa, const SurfaceIntera
   return std::nullopt;
 }
 
-std::optional<Projection> Projector::finish(int segment, const Vec3& xa, const Vec3& near, bool found) const {
+std::optional<Projection> Projector::finish(int segment, const Vec3& xa, const Vec3& near, bool found, const Vec3& w_orig) const {
   const BoundarySegment& s = m_space.segments()[size_t(segment)];
   Vec3 xb = near;
   if (s.kind == BoundarySegment::Kind::MeshEdge) {
@@ -126,13 +126,22 @@ std::optional<Projection> Projector::finish(int segment, const Vec3& xa, const V
     if (lambda < 0.0f) return std::nullopt;
     xb = a + lambda * (b - a);
   }
-  const Vec3 d = xa - xb;
-  if (!(glm::length(d) > 0.0f)) return std::nullopt;
-  const Vec3 w = glm::normalize(d);
-  const Vec3 u = m_space.invert(segment, xb, w);
-  BoundaryPoint check;
-  if (!m_space.sample(u, 1.0f, check) || check.segment != segment) return std::nullopt;  // not a silhouette for w
-  return Projection{u, segment, check.xb, check.w, found};
+  // Section 5: an approximate boundary segment x'_a -> x'_b suffices. Keeping the original direction
+  // (made tangential on spheres) and letting x_a slide keeps what the segment saw at x_a, e.g. a
+  // near-specular reflection towards the camera; the direction to x_a itself is the second choice.
+  Vec3 first = w_orig;
+  if (s.kind == BoundarySegment::Kind::SphereSurface) {
+    const Vec3 n = glm::normalize(xb - m_scene.shapes[s.shape].sphere().center);
+    first = w_orig - glm::dot(w_orig, n) * n;
+  }
+  for (const Vec3& d : {first, xa - xb}) {
+    if (!(glm::length(d) > 0.0f) || !std::isfinite(d.x + d.y + d.z)) continue;
+    const Vec3 w = glm::normalize(d);
+    const Vec3 u = m_space.invert(segment, xb, w);
+    BoundaryPoint check;
+    if (m_space.sample(u, 1.0f, check) && check.segment == segment) return Projection{u, segment, check.xb, check.w, found};
+  }
+  return std::nullopt;  // neither direction sees a silhouette there
 }
 
 std::optional<Projection> Projector::project_sphere(const Vec3& xa, const SurfaceInteraction& hit) const {
@@ -159,7 +168,7 @@ std::optional<Projection> Projector::project_sphere(const Vec3& xa, const Surfac
   side = glm::normalize(side);
   const float sin_phi = sp.radius / dist;
   const Vec3 nb = co_dir * sin_phi + side * safe_sqrt(1.0f - sin_phi * sin_phi);
-  return finish(segment, xa, sp.center + sp.radius * nb, true);
+  return finish(segment, xa, sp.center + sp.radius * nb, true, glm::normalize(xa - hit.p));
 }
 
 int Projector::walk(int shape, const Vec3& xa, int& f, int steps, Pcg32& rng, int& taken) const {
@@ -248,7 +257,7 @@ std::optional<Projection> Projector::snap(int shape, int f, const Vec3& xa, cons
   if (best < 0) return std::nullopt;
   const BoundarySegment& s = m_space.segments()[size_t(best)];
   const Vec3 w0 = glm::normalize(xa - best_point);
-  if (s.face1 < 0) return finish(best, xa, best_point, false);
+  if (s.face1 < 0) return finish(best, xa, best_point, false, w0);
   // Both faces see w0 alike: tilt w0 just past the plane of the face it is closest to.
   const Vec3 n0 = Vec3(m.face_normal(s.face0)), n1 = Vec3(m.face_normal(s.face1));
   const Vec3 nk = std::abs(glm::dot(n0, w0)) < std::abs(glm::dot(n1, w0)) ? n0 : n1;
@@ -276,7 +285,7 @@ std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceI
     }
   }
   std::optional<Projection> r;
-  if (seg >= 0) r = finish(seg, xa, hit.p, true);
+  if (seg >= 0) r = finish(seg, xa, hit.p, true, glm::normalize(xa - hit.p));
   if (!r) r = snap(hit.shape, f, xa, p);
   if (r) {
     r->walk_steps = taken;

@@ -22,7 +22,7 @@ namespace limn {
 struct Projection {
   Vec3 u;            // point of the boundary sample space
   int segment;       // its segment (edge or sphere) in the boundary space
-  Vec3 xb, w;        // the boundary point and the direction from it towards x_a
+  Vec3 xb, w;        // the boundary point and the direction from it towards (a slightly shifted) x_a
   bool found;        // a true silhouette; false: the snapped fallback
   int walk_steps = 0, jumps = 0;
 };
@@ -44,7 +44,9 @@ class Projector {
   int walk(int shape, const Vec3& xa, int& f, int steps, Pcg32& rng, int& taken) const;
   // One JUMP from point p on triangle f; lands on triangle f (updated) at p (updated).
   bool jump(int shape, const Vec3& xa, int& f, Vec3& p) const;
-  std::optional<Projection> finish(int segment, const Vec3& xa, const Vec3& near, bool found) const;
+  // The boundary point on `segment` nearest to `near`, with the original segment direction w_orig
+  // if it sees a silhouette there, else the direction to xa.
+  std::optional<Projection> finish(int segment, const Vec3& xa, const Vec3& near, bool found, const Vec3& w_orig) const;
   std::optional<Projection> snap(int shape, int f, const Vec3& xa, const Vec3& p) const;
 
   struct MeshTopology {

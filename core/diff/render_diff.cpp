@@ -11,6 +11,7 @@
 #include "core/diff/interior.h"
 #include "core/diff/indirect.h"
 #include "core/diff/primary.h"
+#include "core/diff/seeding.h"
 #include "core/guiding/grid.h"
 
 namespace limn {
@@ -46,8 +47,10 @@ void for_each_pixel(const Scene& scene, const DiffOptions& opt, PerPixel&& per_p
 
 void validate(const Scene& scene, const DiffParams& params, const DiffOptions& opt) {
   if (params.empty()) throw std::invalid_argument(scene.source + ": no differentiable parameters (call set_differentiable first)");
-  if (opt.guiding != "none" && opt.guiding != "grid")
-    throw std::invalid_argument(scene.source + ": guiding must be 'none' or 'grid' (got '" + opt.guiding + "')");
+  if (opt.guiding != "none" && opt.guiding != "grid" && opt.guiding != "octree")
+    throw std::invalid_argument(scene.source + ": guiding must be 'none', 'grid' or 'octree' (got '" + opt.guiding + "')");
+  parse_seed_segments(opt.project_seed, scene.source);
+  if (opt.guiding_spp < 1) throw std::invalid_argument(scene.source + ": guiding_spp must be >= 1");
   if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
 }
 
@@ -55,8 +58,9 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
 struct BoundaryTerms {
   std::unique_ptr<PrimaryBoundary> primary;
   std::unique_ptr<IndirectBoundary> indirect;
-  std::unique_ptr<BoundaryGrid> grid;
-  double grid_seconds = 0.0;
+  std::unique_ptr<BoundaryGuide> guide;
+  double guide_seconds = 0.0;
+  std::string guide_origin;  // how the guide was filled
 };
 
 std::vector<std::string> summarize(const Scene& scene, const DiffParams& params, int spp, const DiffOptions& opt,
@@ -85,11 +89,9 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
                 std::to_string(indirect->space().edge_count()) + " edges and " + std::to_string(indirect->space().sphere_count()) +
                 " sphere surfaces (" + std::to_string(indirect->space().static_count()) +
                 " of them static: they count where a moving surface ends the segment), " +
-                (terms && terms->grid ? "guiding grid " + std::to_string(opt.grid_resolution) + "x" + std::to_string(std::max(1, opt.grid_resolution / 4)) +
-                                            "x" + std::to_string(std::max(1, opt.grid_resolution / 2)) + " (" + std::to_string(opt.guiding_spp) +
-                                            " points per cell, " + std::to_string(terms->grid->empty_cells()) + " of " +
-                                            std::to_string(terms->grid->cell_count()) + " cells empty, built in " +
-                                            std::to_string(terms->grid_seconds) + " s, 10% uniform defensive mixture)"
+                (terms && terms->guide ? "guiding " + terms->guide->describe() + ", " + terms->guide_origin + ", built in " +
+                                             std::to_string(terms->guide_seconds) + " s, " +
+                                             std::to_string(terms->guide->memory_bytes() / 1024) + " KiB, 10% uniform defensive mixture"
                                       : std::string("guiding none (uniform)")));
   return s;
 }
@@ -154,6 +156,45 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 }
 
 
+// The guiding distribution of the indirect term for this call: the path-space baseline grid
+// (random points per cell), or projected seeds into a grid (their integrand values) or an octree
+// (their positions; leaf masses from uniform samples).
+void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptions& opt, int max_depth, BoundaryTerms& terms) {
+  auto integrand = [&](const Vec3& u) {
+    uint32_t bits[3];
+    std::memcpy(bits, &u, sizeof(bits));
+    return ib.guide_value(u, mix_bits((uint64_t(bits[0]) << 32 | bits[1]) ^ (uint64_t(bits[2]) * 0x9E3779B97F4A7C15ULL)));
+  };
+  const int R = opt.grid_resolution;
+  const std::array<int, 3> res{R, std::max(1, R / 4), std::max(1, R / 2)};
+  if (opt.guiding == "grid" && !opt.projective) {
+    terms.guide = std::make_unique<BoundaryGrid>(res, opt.guiding_spp, opt.seed, opt.threads, integrand);
+    terms.guide_origin = std::to_string(opt.guiding_spp) + " random points per cell";
+    return;
+  }
+  const Projector projector(scene, ib.space());
+  SeedStats st;
+  const uint64_t paths = uint64_t(opt.guiding_spp) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+  const std::vector<Projection> seeds =
+      projected_seeds(scene, projector, paths, parse_seed_segments(opt.project_seed, scene.source), max_depth, opt.seed, opt.threads, &st);
+  std::vector<Vec3> points(seeds.size());
+  for (size_t i = 0; i < seeds.size(); ++i) points[i] = seeds[i].u;
+  terms.guide_origin = std::to_string(st.paths) + " seed paths (" + opt.project_seed + " segments): " + std::to_string(st.segments) +
+                       " segments, " + std::to_string(st.projected) + " projected, " + std::to_string(st.found) + " onto silhouettes";
+  if (opt.guiding == "grid") {
+    std::vector<float> values(points.size(), 0.0f);
+    tbb::task_arena arena(opt.threads > 0 ? opt.threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) values[i] = integrand(points[i]);
+      });
+    });
+    terms.guide = std::make_unique<BoundaryGrid>(res, points, values);
+  } else {
+    terms.guide = std::make_unique<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand);
+  }
+}
+
 // Runs every enabled boundary term. visit(inputs, splats, velocities) is called once per sample:
 // the sample adds splat.value * d(velocities[splat.velocity]) to splat.pixel, values already
 // divided by the term's sample count.
@@ -180,27 +221,20 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
   if (opt.spp_boundary > 0) {
     terms.indirect = std::make_unique<IndirectBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
     const uint64_t n = samples_for(scene, opt.spp_boundary);
-    if (!terms.indirect->empty() && opt.guiding == "grid") {
+    if (!terms.indirect->empty() && opt.guiding != "none") {
       const auto t0 = std::chrono::steady_clock::now();
-      const int R = opt.grid_resolution;
-      const IndirectBoundary& ib = *terms.indirect;
-      terms.grid = std::make_unique<BoundaryGrid>(std::array<int, 3>{R, std::max(1, R / 4), std::max(1, R / 2)}, opt.guiding_spp,
-                                                  opt.seed, opt.threads, [&](const Vec3& u) {
-        uint32_t bits[3];
-        std::memcpy(bits, &u, sizeof(bits));
-        return ib.guide_value(u, mix_bits((uint64_t(bits[0]) << 32 | bits[1]) ^ (uint64_t(bits[2]) * 0x9E3779B97F4A7C15ULL)));
-      });
-      terms.grid_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      build_guide(scene, *terms.indirect, opt, effective_max_depth(scene, opt.max_depth), terms);
+      terms.guide_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
     if (!terms.indirect->empty())
       for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
         std::vector<IndirectBoundary::Splat> splats;
         std::vector<ad::Var> vel;
         uint64_t r = 0;
-        if (terms.grid) {
+        if (terms.guide) {
           float pdf_u;
-          const Vec3 u = terms.grid->sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf_u);
-          terms.indirect->sample_at(u, pdf_u, terms.grid->pdf_first(u.x), rng, in, splats, vel, r);
+          const Vec3 u = terms.guide->sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf_u);
+          terms.indirect->sample_at(u, pdf_u, terms.guide->pdf_first(u.x), rng, in, splats, vel, r);
         } else {
           terms.indirect->sample(rng, in, splats, vel, r);
         }

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 #include "core/diff/diff_params.h"
+#include "core/guiding/octree.h"
 #include "core/render/render.h"
 
 namespace limn {
@@ -18,9 +19,12 @@ struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
   int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
   int spp_boundary = 0;   // indirect boundary samples, per pixel on average (0: off)
-  std::string guiding = "none";  // indirect boundary: "none" (uniform) or "grid" (core/guiding/grid.h)
-  int grid_resolution = 32;      // grid cells along the edge axis; (R/4, R/2) along the direction axes
-  int guiding_spp = 4;           // random points per grid cell when the grid is built
+  std::string guiding = "none";  // indirect boundary: "none" (uniform), "grid" or "octree" (core/guiding/)
+  bool projective = true;        // grid: fill from projected seeds (false: the path-space baseline)
+  std::string project_seed = "both";  // seed segments from "bsdf", "emitter" or "both" (core/diff/seeding.h)
+  int grid_resolution = 32;      // grid cells along the first axis; (R/4, R/2) along the direction axes
+  int guiding_spp = 4;           // baseline grid: random points per cell; projective: seed paths per pixel
+  OctreeOptions octree;
   int max_depth = kSceneMaxDepth;  // path integrator: overrides the scene's max_depth for every term
   uint64_t seed = 0;
   int threads = 0;

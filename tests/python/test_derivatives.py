@@ -233,8 +233,12 @@ def test_api_errors():
         scene.render_forward({"floor.reflectance": np.ones(4)})
     with pytest.raises(ValueError, match="spp_boundary must be >= 0"):
         scene.render_forward({"floor.reflectance": np.ones(3)}, spp_boundary=-1)
-    with pytest.raises(ValueError, match="guiding must be 'none' or 'grid'"):
-        scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="octree")
+    with pytest.raises(ValueError, match="guiding must be 'none', 'grid' or 'octree'"):
+        scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="kdtree")
+    with pytest.raises(ValueError, match="project_seed must be"):
+        scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="grid", project_seed="camera")
+    with pytest.raises(TypeError, match="unknown derivative option"):
+        scene.render_forward({"floor.reflectance": np.ones(3)}, guidance="grid")
     with pytest.raises(ValueError, match="adjoint must have shape"):
         scene.render_backward(np.ones((2, 2, 3)))
 

@@ -168,8 +168,9 @@ def test_sphere_seen_in_a_glossy_reflection():
 
 
 def test_grid_guiding_agrees_and_lowers_the_error():
-    """Area-light shadow: grid guiding must agree with finite differences and, at equal boundary
-    samples, beat uniform sampling of the boundary sample space."""
+    """Area-light shadow: the path-space baseline grid (random points per cell) must agree with
+    finite differences and, at equal boundary samples, beat uniform sampling of the boundary
+    sample space."""
     scene = load(shadow_scene(AREA))
     name = "box.vertex_positions"
     t = np.zeros_like(scene.params[name])
@@ -179,13 +180,33 @@ def test_grid_guiding_agrees_and_lowers_the_error():
     ref = fd.mean(0)
     def run(guiding, k):
         return quiet(scene.render_forward, {name: t}, spp=16, spp_primary=16, spp_boundary=64, guiding=guiding,
-                     grid_resolution=32, guiding_spp=4, seed=70 + k)
+                     projective=False, grid_resolution=32, guiding_spp=4, seed=70 + k)
     grid = np.stack([run("grid", k) for k in range(8)])
     uniform = np.stack([run("none", k) for k in range(8)])
-    assert any("guiding grid 32x8x16" in line for line in (quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1,
-                                                                    guiding="grid") is not None and scene.last_stats["summary"]))
+    quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="grid", projective=False)
+    assert any("guiding grid 32x8x16" in line and "random points per cell" in line for line in scene.last_stats["summary"])
     z = block_z(grid, fd)
     assert np.abs(z).max() < 5.0, z
     err = lambda s: float(np.sqrt(((s - ref) ** 2).mean(axis=(1, 2, 3))).mean())
     print(f"rmse grid {err(grid):.4f} uniform {err(uniform):.4f}")
     assert err(grid) < err(uniform), (err(grid), err(uniform))
+
+
+@pytest.mark.parametrize("guiding", ["grid", "octree"])
+def test_projective_guiding_agrees_with_fd(guiding):
+    """Projective guides (seeds projected onto silhouettes) are unbiased: with many boundary
+    samples they agree with finite differences block by block, and the summary says how they
+    were built."""
+    scene = load(shadow_scene(AREA))
+    name = "box.vertex_positions"
+    t = np.zeros_like(scene.params[name])
+    t[:, 0] = 1.0
+    scene.set_differentiable([name])
+    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=1024, seed=k, cache=False) for k in range(8)])
+    runs = np.stack([quiet(scene.render_forward, {name: t}, spp=16, spp_primary=64, spp_boundary=1024, guiding=guiding,
+                           guiding_spp=32, seed=90 + k) for k in range(8)])
+    line = next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+    assert ("projective grid" if guiding == "grid" else "octree 100 slices") in line, line
+    assert "onto silhouettes" in line
+    z = block_z(runs, fd)
+    assert np.abs(z).max() < 5.0, z

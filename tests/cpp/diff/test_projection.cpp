@@ -81,16 +81,18 @@ Rates check_projections(const Scene& scene, const BoundarySpace& space, MeshProj
     CHECK(glm::length(q.xb - p->xb) < 1e-4f);
     CHECK(glm::length(q.w - p->w) < 1e-3f);
     if (!p->found) continue;
-    CHECK(glm::length(p->w - glm::normalize(xa - p->xb)) < 1e-3f);  // the segment ends at xa
+    // The boundary segment keeps the original direction where it can (x_a slides a little).
+    CHECK(glm::dot(p->w, glm::normalize(xa - hit.p)) > 0.5f);
     const BoundarySegment& s = space.segments()[size_t(p->segment)];
     if (s.kind == BoundarySegment::Kind::SphereSurface) {
       const Sphere& sp = scene.shapes[s.shape].sphere();
+      CHECK(std::abs(glm::dot(glm::normalize(p->xb - sp.center), p->w)) < 1e-4f);  // tangent
+      // On the silhouette seen from xa itself, too (Listing 1).
       CHECK(std::abs(glm::dot(glm::normalize(p->xb - sp.center), glm::normalize(p->xb - xa))) < 1e-4f);
     } else if (s.face1 >= 0) {
       const Mesh& m = scene.shapes[s.shape].mesh();
-      const double s0 = glm::dot(m.face_normal(s.face0), Vec3d(xa - p->xb));
-      const double s1 = glm::dot(m.face_normal(s.face1), Vec3d(xa - p->xb));
-      CHECK(s0 * s1 < 0.0);  // one face towards xa, the other away: a true silhouette
+      const double s0 = glm::dot(m.face_normal(s.face0), Vec3d(p->w)), s1 = glm::dot(m.face_normal(s.face1), Vec3d(p->w));
+      CHECK(s0 * s1 < 0.0);  // one face towards w, the other away: a true silhouette for the ray
     }
   }
   return r;
