@@ -59,7 +59,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from . import bench
     md = bench.run(args.scene, args.param, args.methods.split(","), args.budgets, args.fd_spp, args.eps, args.out,
-                   tangent=args.tangent, argv=args.argv)
+                   tangent=args.tangent, argv=args.argv, runs=args.runs)
     print(f"wrote {os.path.abspath(md)}")
     return 0
 
@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--budgets", type=int, nargs="+", default=[4, 16, 64])
     b.add_argument("--fd-spp", type=int, default=4096)
     b.add_argument("--eps", type=float, default=1e-2)
+    b.add_argument("--runs", type=int, default=1, help="runs per method and budget (different seeds); errors are averaged")
     b.add_argument("--out", default="docs/reports")
     b.set_defaults(func=cmd_bench)
     args = parser.parse_args(argv)

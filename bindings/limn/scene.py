@@ -57,6 +57,7 @@ class Scene:
         self._differentiable: list[str] = []
         self.params = Parameters(native)
         self.last_stats: dict = {}
+        self.guide_cache = _core.GuideCache()  # guides kept between calls (option guide_refresh)
         for message in native.warnings:
             warnings.warn(message, stacklevel=3)
 
@@ -118,7 +119,7 @@ class Scene:
     # Derivative options and their defaults (render_forward / render_backward keyword arguments).
     DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 32, "guiding_spp": 4,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
-                    "max_depth": None, "threads": 0}
+                    "guide_refresh": 0, "guide_refresh_threshold": 0.02, "max_depth": None, "threads": 0}
 
     def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
         if not self._differentiable:
@@ -179,6 +180,10 @@ class Scene:
         - ``guiding_spp``: projective guides trace ``guiding_spp`` seed paths per pixel, whose
           segments (``project_seed``: ``"bsdf"``, ``"emitter"`` or ``"both"``) are projected onto
           silhouettes.
+        - ``guide_refresh`` k > 0 keeps the guide in ``Scene.guide_cache`` and reuses it for up to k
+          calls while the settings are the same and no moving geometry moved by more than
+          ``guide_refresh_threshold`` of its bounding-box diagonal (optimisation loops); 0 builds
+          it every call.
         - ``max_depth`` overrides the path integrator's longest path for every term;
           ``threads`` (0: all cores).
 
@@ -196,7 +201,7 @@ class Scene:
             if not np.isfinite(t).all():
                 raise ValueError(f"tangent of '{n}' has non-finite values")
             arrays.append(np.ascontiguousarray(t))
-        image, stats = self._native.render_forward(self._differentiable, arrays, options, progress)
+        image, stats = self._native.render_forward(self._differentiable, arrays, options, progress, self.guide_cache)
         self._report(stats)
         return image
 
@@ -215,7 +220,8 @@ class Scene:
         a = np.asarray(adjoint, dtype=np.float32)
         if a.shape != (self.height, self.width, 3):
             raise ValueError(f"adjoint must have shape {(self.height, self.width, 3)}, got {a.shape}")
-        grads, stats = self._native.render_backward(self._differentiable, np.ascontiguousarray(a), options, progress)
+        grads, stats = self._native.render_backward(self._differentiable, np.ascontiguousarray(a), options, progress,
+                                                    self.guide_cache)
         self._report(stats)
         return dict(zip(self._differentiable, grads))
 

@@ -98,6 +98,8 @@ DiffOptions diff_options(const py::dict& options) {
     else if (k == "octree_max_depth") o.octree.max_depth = value.cast<int>();
     else if (k == "octree_leaf_samples") o.octree.leaf_samples = value.cast<int>();
     else if (k == "octree_max_leaves") o.octree.max_leaves = value.cast<size_t>();
+    else if (k == "guide_refresh") o.guide_refresh = value.cast<int>();
+    else if (k == "guide_refresh_threshold") o.guide_refresh_threshold = value.cast<float>();
     else throw std::invalid_argument("unknown derivative option '" + k + "'");
   }
   return o;
@@ -139,7 +141,7 @@ py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int thr
 }
 
 py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::string>& names, const std::vector<py::array>& tangents,
-                            const py::dict& options, py::object progress) {
+                            const py::dict& options, py::object progress, GuideCache* cache) {
   const DiffParams params(*scene, names);
   if (tangents.size() != params.params().size()) throw std::invalid_argument("one tangent per differentiable parameter expected");
   std::vector<double> t(params.slot_count(), 0.0);
@@ -150,6 +152,7 @@ py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::str
     std::copy(a.data(), a.data() + a.size(), t.begin() + long(p.offset));
   }
   DiffOptions opt = diff_options(options);
+  opt.guide_cache = cache;
   std::exception_ptr error;
   opt.progress = progress_adapter(progress, error);
   DiffStats st;
@@ -159,10 +162,11 @@ py::tuple render_forward_py(const SceneHandle& scene, const std::vector<std::str
 }
 
 py::tuple render_backward_py(const SceneHandle& scene, const std::vector<std::string>& names, const py::array& adjoint,
-                             const py::dict& options, py::object progress) {
+                             const py::dict& options, py::object progress, GuideCache* cache) {
   const DiffParams params(*scene, names);
   Image adj = numpy_to_image(adjoint);
   DiffOptions opt = diff_options(options);
+  opt.guide_cache = cache;
   std::exception_ptr error;
   opt.progress = progress_adapter(progress, error);
   DiffStats st;
@@ -193,6 +197,13 @@ PYBIND11_MODULE(_core, m) {
   m.doc() = "limn core (C++): scene loading, rendering, image and mesh I/O";
   py::register_exception<RenderCancelled>(m, "RenderCancelled");
 
+  py::class_<GuideCache>(m, "GuideCache", "Guides kept between derivative calls (Scene.render_forward/backward)")
+      .def(py::init<>())
+      .def_readonly("builds", &GuideCache::builds)
+      .def_readonly("reuses", &GuideCache::reuses)
+      .def_readonly("build_seconds", &GuideCache::build_seconds)
+      .def("clear", [](GuideCache& c) { c = GuideCache{}; });
+
   py::class_<Scene, SceneHandle>(m, "Scene")
       .def("render", &render_scene, py::arg("spp") = 0, py::arg("seed") = 0, py::arg("threads") = 0, py::arg("progress") = py::none(),
            py::arg("max_depth") = py::none(),
@@ -216,9 +227,9 @@ PYBIND11_MODULE(_core, m) {
       }, py::arg("id"), "Triangle indices (F, 3) of mesh shape `id`, into its welded vertex_positions")
       .def("update", &Scene::update, "Apply parameter edits; returns the names that changed")
       .def("render_forward", &render_forward_py, py::arg("names"), py::arg("tangents"), py::arg("options"),
-           py::arg("progress") = py::none())
+           py::arg("progress") = py::none(), py::arg("guide_cache") = nullptr)
       .def("render_backward", &render_backward_py, py::arg("names"), py::arg("adjoint"), py::arg("options"),
-           py::arg("progress") = py::none())
+           py::arg("progress") = py::none(), py::arg("guide_cache") = nullptr)
       .def_property_readonly("width", [](const Scene& s) { return s.camera.width; })
       .def_property_readonly("height", [](const Scene& s) { return s.camera.height; })
       .def_property_readonly("spp", [](const Scene& s) { return s.spp; })

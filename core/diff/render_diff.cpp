@@ -58,9 +58,10 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
 struct BoundaryTerms {
   std::unique_ptr<PrimaryBoundary> primary;
   std::unique_ptr<IndirectBoundary> indirect;
-  std::unique_ptr<BoundaryGuide> guide;
+  std::shared_ptr<const BoundaryGuide> guide;
   double guide_seconds = 0.0;
   std::string guide_origin;  // how the guide was filled
+  std::string guide_reuse;   // what the cache did
 };
 
 std::vector<std::string> summarize(const Scene& scene, const DiffParams& params, int spp, const DiffOptions& opt,
@@ -90,7 +91,7 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
                 " sphere surfaces (" + std::to_string(indirect->space().static_count()) +
                 " of them static: they count where a moving surface ends the segment), " +
                 (terms && terms->guide ? "guiding " + terms->guide->describe() + ", " + terms->guide_origin + ", built in " +
-                                             std::to_string(terms->guide_seconds) + " s, " +
+                                             std::to_string(terms->guide_seconds) + " s" + terms->guide_reuse + ", " +
                                              std::to_string(terms->guide->memory_bytes() / 1024) + " KiB, 10% uniform defensive mixture"
                                       : std::string("guiding none (uniform)")));
   return s;
@@ -168,7 +169,7 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
   const int R = opt.grid_resolution;
   const std::array<int, 3> res{R, std::max(1, R / 4), std::max(1, R / 2)};
   if (opt.guiding == "grid" && !opt.projective) {
-    terms.guide = std::make_unique<BoundaryGrid>(res, opt.guiding_spp, opt.seed, opt.threads, integrand);
+    terms.guide = std::make_shared<BoundaryGrid>(res, opt.guiding_spp, opt.seed, opt.threads, integrand);
     terms.guide_origin = std::to_string(opt.guiding_spp) + " random points per cell";
     return;
   }
@@ -189,9 +190,64 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
         for (size_t i = r.begin(); i != r.end(); ++i) values[i] = integrand(points[i]);
       });
     });
-    terms.guide = std::make_unique<BoundaryGrid>(res, points, values);
+    terms.guide = std::make_shared<BoundaryGrid>(res, points, values);
   } else {
-    terms.guide = std::make_unique<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand);
+    terms.guide = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand);
+  }
+}
+
+// The moving geometry's values and bounding-box diagonal (what decides whether a guide is stale).
+std::vector<float> moving_geometry(const Scene& scene, const DiffParams& params, float& extent) {
+  std::vector<float> g;
+  Vec3 lo(kInfinity), hi(-kInfinity);
+  for (int si : params.moving_shapes()) {
+    const Shape& sh = scene.shapes[si];
+    if (sh.is_mesh()) {
+      g.insert(g.end(), sh.mesh().positions.begin(), sh.mesh().positions.end());
+    } else {
+      const Sphere& sp = sh.sphere();
+      g.insert(g.end(), {sp.center.x, sp.center.y, sp.center.z, sp.radius});
+    }
+  }
+  for (size_t i = 0; i + 2 < g.size(); i += 3) {
+    lo = glm::min(lo, Vec3(g[i], g[i + 1], g[i + 2]));
+    hi = glm::max(hi, Vec3(g[i], g[i + 1], g[i + 2]));
+  }
+  extent = g.size() >= 3 ? glm::length(hi - lo) : 0.0f;
+  return g;
+}
+
+// Builds the guide, or reuses the cached one (DiffOptions::guide_cache, GuideCache's rules).
+void guide_for_call(const Scene& scene, const DiffParams& params, const IndirectBoundary& ib, const DiffOptions& opt,
+                    BoundaryTerms& terms) {
+  GuideCache* cache = opt.guide_refresh > 0 ? opt.guide_cache : nullptr;
+  const std::string key = opt.guiding + "|" + (opt.projective ? "p" : "u") + "|" + opt.project_seed + "|" +
+                          std::to_string(opt.grid_resolution) + "|" + std::to_string(opt.guiding_spp) + "|" +
+                          std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
+                          std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "|" +
+                          std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);
+  float extent = 0.0f;
+  const std::vector<float> geometry = moving_geometry(scene, params, extent);
+  if (cache && cache->guide && cache->key == key && cache->uses < opt.guide_refresh && cache->geometry.size() == geometry.size()) {
+    float moved = 0.0f;
+    for (size_t i = 0; i < geometry.size(); ++i) moved = std::max(moved, std::abs(geometry[i] - cache->geometry[i]));
+    if (moved <= opt.guide_refresh_threshold * std::max(cache->extent, 1e-6f)) {
+      terms.guide = cache->guide;
+      terms.guide_origin = cache->origin;
+      terms.guide_seconds = 0.0;
+      cache->uses++;
+      cache->reuses++;
+      terms.guide_reuse = " (reused: call " + std::to_string(cache->uses) + " of " + std::to_string(opt.guide_refresh) +
+                          " since it was built in " + std::to_string(cache->build_seconds) + " s)";
+      return;
+    }
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  build_guide(scene, ib, opt, effective_max_depth(scene, opt.max_depth), terms);
+  terms.guide_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (cache) {
+    *cache = GuideCache{terms.guide, key, terms.guide_origin, geometry, extent, 1, terms.guide_seconds, cache->builds + 1, cache->reuses};
+    terms.guide_reuse = " (kept for up to " + std::to_string(opt.guide_refresh) + " calls)";
   }
 }
 
@@ -221,11 +277,7 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
   if (opt.spp_boundary > 0) {
     terms.indirect = std::make_unique<IndirectBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
     const uint64_t n = samples_for(scene, opt.spp_boundary);
-    if (!terms.indirect->empty() && opt.guiding != "none") {
-      const auto t0 = std::chrono::steady_clock::now();
-      build_guide(scene, *terms.indirect, opt, effective_max_depth(scene, opt.max_depth), terms);
-      terms.guide_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    }
+    if (!terms.indirect->empty() && opt.guiding != "none") guide_for_call(scene, params, *terms.indirect, opt, terms);
     if (!terms.indirect->empty())
       for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
         std::vector<IndirectBoundary::Splat> splats;

@@ -10,10 +10,27 @@
 #include <string>
 #include <vector>
 #include "core/diff/diff_params.h"
+#include <memory>
 #include "core/guiding/octree.h"
 #include "core/render/render.h"
 
 namespace limn {
+
+// A guide kept between calls (optimisation iterations). It is reused while the guiding settings
+// and the boundary sample space's layout are the same, for at most `guide_refresh` calls, and
+// while no moving geometry has moved by more than `guide_refresh_threshold` of its bounding-box
+// diagonal since the guide was built. A stale guide is still a valid density (the estimate stays
+// unbiased), only less well matched.
+struct GuideCache {
+  std::shared_ptr<const BoundaryGuide> guide;
+  std::string key;
+  std::string origin;
+  std::vector<float> geometry;  // moving geometry when the guide was built
+  float extent = 0.0f;          // its bounding-box diagonal
+  int uses = 0;
+  double build_seconds = 0.0;
+  uint64_t builds = 0, reuses = 0;
+};
 
 struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
@@ -25,6 +42,9 @@ struct DiffOptions {
   int grid_resolution = 32;      // grid cells along the first axis; (R/4, R/2) along the direction axes
   int guiding_spp = 4;           // baseline grid: random points per cell; projective: seed paths per pixel
   OctreeOptions octree;
+  GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
+  int guide_refresh = 0;              // rebuild after this many calls (0: every call)
+  float guide_refresh_threshold = 0.02f;
   int max_depth = kSceneMaxDepth;  // path integrator: overrides the scene's max_depth for every term
   uint64_t seed = 0;
   int threads = 0;

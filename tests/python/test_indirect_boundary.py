@@ -210,3 +210,28 @@ def test_projective_guiding_agrees_with_fd(guiding):
     assert "onto silhouettes" in line
     z = block_z(runs, fd)
     assert np.abs(z).max() < 5.0, z
+
+
+def test_guides_are_reused_across_calls_until_refresh_or_motion():
+    """guide_refresh=k keeps the guide for k calls while the geometry stays put; moving the
+    occluder by more than the threshold, or other settings, rebuild it."""
+    scene = load(shadow_scene(AREA))
+    name = "box.vertex_positions"
+    t = np.zeros_like(scene.params[name])
+    t[:, 0] = 1.0
+    scene.set_differentiable([name])
+    opts = dict(spp=2, spp_boundary=8, guiding="octree", guide_refresh=3)
+    for k in range(4):
+        quiet(scene.render_forward, {name: t}, seed=k, **opts)
+    line = next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+    assert "kept for up to 3 calls" in line, line  # the fourth call rebuilt it
+    assert (scene.guide_cache.builds, scene.guide_cache.reuses) == (2, 2)
+    quiet(scene.render_forward, {name: t}, seed=5, **opts)
+    assert "reused: call 2 of 3" in next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+    scene.params[name][:, 0] += 0.1  # more than 2 % of the box's 1.04 diagonal
+    quiet(scene.render_forward, {name: t}, seed=6, **opts)
+    assert scene.guide_cache.builds == 3
+    quiet(scene.render_forward, {name: t}, seed=7, **dict(opts, guiding="grid"))
+    assert scene.guide_cache.builds == 4
+    quiet(scene.render_forward, {name: t}, seed=8, **dict(opts, guide_refresh=0))  # no cache: nothing kept
+    assert scene.guide_cache.builds == 4
