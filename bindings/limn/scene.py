@@ -117,7 +117,8 @@ class Scene:
         return list(self._differentiable)
 
     # Derivative options and their defaults (render_forward / render_backward keyword arguments).
-    DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 32, "guiding_spp": 4,
+    DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "guiding_spp": 4,
+                    "guiding_seeds": 32,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02, "max_depth": None, "threads": 0}
 
@@ -140,7 +141,7 @@ class Scene:
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
-        for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples"):
+        for name in ("grid_resolution", "guiding_spp", "guiding_seeds", "octree_slices", "octree_leaf_samples"):
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
         self.update()
@@ -177,7 +178,7 @@ class Scene:
           ``octree_max_leaves`` leaves: beyond that it coarsens and the summary says so).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
-        - ``guiding_spp``: projective guides trace ``guiding_spp`` seed paths per pixel, whose
+        - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose
           segments (``project_seed``: ``"bsdf"``, ``"emitter"`` or ``"both"``) are projected onto
           silhouettes.
         - ``guide_refresh`` k > 0 keeps the guide in ``Scene.guide_cache`` and reuses it for up to k

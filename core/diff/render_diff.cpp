@@ -50,7 +50,8 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
   if (opt.guiding != "none" && opt.guiding != "grid" && opt.guiding != "octree")
     throw std::invalid_argument(scene.source + ": guiding must be 'none', 'grid' or 'octree' (got '" + opt.guiding + "')");
   parse_seed_segments(opt.project_seed, scene.source);
-  if (opt.guiding_spp < 1) throw std::invalid_argument(scene.source + ": guiding_spp must be >= 1");
+  if (opt.guiding_spp < 1 || opt.guiding_seeds < 1)
+    throw std::invalid_argument(scene.source + ": guiding_spp and guiding_seeds must be >= 1");
   if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
 }
 
@@ -175,25 +176,23 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
   }
   const Projector projector(scene, ib.space());
   SeedStats st;
-  const uint64_t paths = uint64_t(opt.guiding_spp) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+  const uint64_t paths = uint64_t(opt.guiding_seeds) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
   const std::vector<Projection> seeds =
       projected_seeds(scene, projector, paths, parse_seed_segments(opt.project_seed, scene.source), max_depth, opt.seed, opt.threads, &st);
   std::vector<Vec3> points(seeds.size());
   for (size_t i = 0; i < seeds.size(); ++i) points[i] = seeds[i].u;
   terms.guide_origin = std::to_string(st.paths) + " seed paths (" + opt.project_seed + " segments): " + std::to_string(st.segments) +
                        " segments, " + std::to_string(st.projected) + " projected, " + std::to_string(st.found) + " onto silhouettes";
-  if (opt.guiding == "grid") {
-    std::vector<float> values(points.size(), 0.0f);
-    tbb::task_arena arena(opt.threads > 0 ? opt.threads : tbb::task_arena::automatic);
-    arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i) values[i] = integrand(points[i]);
-      });
+  // The integrand at every projection: the grid's cell masses, part of the octree's leaf masses.
+  std::vector<float> values(points.size(), 0.0f);
+  tbb::task_arena arena(opt.threads > 0 ? opt.threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i != r.end(); ++i) values[i] = integrand(points[i]);
     });
-    terms.guide = std::make_shared<BoundaryGrid>(res, points, values);
-  } else {
-    terms.guide = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand);
-  }
+  });
+  if (opt.guiding == "grid") terms.guide = std::make_shared<BoundaryGrid>(res, points, values);
+  else terms.guide = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values);
 }
 
 // The moving geometry's values and bounding-box diagonal (what decides whether a guide is stale).
@@ -223,6 +222,7 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
   GuideCache* cache = opt.guide_refresh > 0 ? opt.guide_cache : nullptr;
   const std::string key = opt.guiding + "|" + (opt.projective ? "p" : "u") + "|" + opt.project_seed + "|" +
                           std::to_string(opt.grid_resolution) + "|" + std::to_string(opt.guiding_spp) + "|" +
+                          std::to_string(opt.guiding_seeds) + "|" +
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
                           std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "|" +
                           std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);

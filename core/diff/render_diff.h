@@ -39,8 +39,9 @@ struct DiffOptions {
   std::string guiding = "none";  // indirect boundary: "none" (uniform), "grid" or "octree" (core/guiding/)
   bool projective = true;        // grid: fill from projected seeds (false: the path-space baseline)
   std::string project_seed = "both";  // seed segments from "bsdf", "emitter" or "both" (core/diff/seeding.h)
-  int grid_resolution = 32;      // grid cells along the first axis; (R/4, R/2) along the direction axes
-  int guiding_spp = 4;           // baseline grid: random points per cell; projective: seed paths per pixel
+  int grid_resolution = 64;      // grid cells along the first axis; (R/4, R/2) along the direction axes
+  int guiding_spp = 4;           // baseline grid: random points per cell
+  int guiding_seeds = 32;        // projective guides: seed paths per pixel
   OctreeOptions octree;
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
   int guide_refresh = 0;              // rebuild after this many calls (0: every call)

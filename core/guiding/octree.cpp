@@ -11,7 +11,7 @@
 namespace limn {
 
 BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& opt, uint64_t seed, int threads,
-                               const std::function<float(const Vec3&)>& integrand)
+                               const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values)
     : m_opt(opt) {
   if (opt.slices < 1 || opt.slices > 1 << 16) throw std::invalid_argument("octree guiding: slices must be in [1, 65536] (got " + std::to_string(opt.slices) + ")");
   if (opt.max_depth < 0 || opt.max_depth > 12) throw std::invalid_argument("octree guiding: max_depth must be in [0, 12] (got " + std::to_string(opt.max_depth) + ")");
@@ -37,6 +37,7 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   size_t leaves = size_t(S);
   int deepest = 0;
   std::vector<std::pair<int, Leaf>> leaf_nodes;
+  std::vector<std::vector<uint32_t>> leaf_points;  // the projected points each leaf holds
   while (!queue.empty()) {
     Pending n = std::move(queue.front());
     queue.pop_front();
@@ -44,6 +45,7 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
     if (split && leaves + 7 > opt.max_leaves) m_coarsened = true;
     if (!split || leaves + 7 > opt.max_leaves) {
       leaf_nodes.push_back({n.node, Leaf{n.lo, n.size}});
+      leaf_points.push_back(std::move(n.idx));
       deepest = std::max(deepest, n.depth);
       continue;
     }
@@ -77,12 +79,18 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
         Pcg32 rng = pixel_rng(mix_bits(seed ^ 0x6f63747265650aULL), l);
         const Leaf& leaf = m_leaves[l];
         double sum = 0.0;
+        int count = opt.leaf_samples;
         for (int s = 0; s < opt.leaf_samples; ++s) {
           const Vec3 p = leaf.lo + leaf.size * Vec3(rng.next_float(), rng.next_float(), rng.next_float());
           const float f = integrand(glm::min(p, Vec3(1.0f - 1e-7f)));
           if (std::isfinite(f) && f > 0.0f) sum += f;
         }
-        mass[l] = sum / opt.leaf_samples * double(leaf.size.x) * leaf.size.y * leaf.size.z;
+        if (!values.empty())
+          for (uint32_t i : leaf_points[l]) {
+            if (std::isfinite(values[i]) && values[i] > 0.0f) sum += values[i];
+            ++count;
+          }
+        mass[l] = sum / count * double(leaf.size.x) * leaf.size.y * leaf.size.z;
       }
     });
   });

@@ -3,7 +3,9 @@
 // their concatenation); each slab is an octree built bottom-up from projected samples, splitting a
 // node 8 ways while it holds more than one sample and is shallower than `max_depth`. Every leaf's
 // mass is then estimated from `leaf_samples` uniform points inside it (no projections needed),
-// and leaves are sampled in proportion to it, mixed with a defensive uniform component.
+// together with the integrand at the projected points the leaf holds (`values`, optional: a leaf
+// narrower than its feature would otherwise often miss it with a few uniform points), and leaves
+// are sampled in proportion to it, mixed with a defensive uniform component.
 //
 // Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
 // (coarsened(), said in the summary), never dropping samples or the boundary term.
@@ -28,7 +30,7 @@ class BoundaryOctree : public BoundaryGuide {
  public:
   // integrand(u) >= 0; called from several threads at once.
   BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& options, uint64_t seed, int threads,
-                 const std::function<float(const Vec3&)>& integrand);
+                 const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values = {});
 
   Vec3 sample(const Vec3& u, float* pdf) const override;
   float pdf(const Vec3& p) const override;

@@ -183,7 +183,7 @@ def test_grid_guiding_agrees_and_lowers_the_error():
                      projective=False, grid_resolution=32, guiding_spp=4, seed=70 + k)
     grid = np.stack([run("grid", k) for k in range(8)])
     uniform = np.stack([run("none", k) for k in range(8)])
-    quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="grid", projective=False)
+    quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="grid", projective=False, grid_resolution=32)
     assert any("guiding grid 32x8x16" in line and "random points per cell" in line for line in scene.last_stats["summary"])
     z = block_z(grid, fd)
     assert np.abs(z).max() < 5.0, z
@@ -204,7 +204,7 @@ def test_projective_guiding_agrees_with_fd(guiding):
     scene.set_differentiable([name])
     fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=1024, seed=k, cache=False) for k in range(8)])
     runs = np.stack([quiet(scene.render_forward, {name: t}, spp=16, spp_primary=64, spp_boundary=1024, guiding=guiding,
-                           guiding_spp=32, seed=90 + k) for k in range(8)])
+                           guiding_seeds=32, seed=90 + k) for k in range(8)])
     line = next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
     assert ("projective grid" if guiding == "grid" else "octree 100 slices") in line, line
     assert "onto silhouettes" in line
@@ -235,3 +235,27 @@ def test_guides_are_reused_across_calls_until_refresh_or_motion():
     assert scene.guide_cache.builds == 4
     quiet(scene.render_forward, {name: t}, seed=8, **dict(opts, guide_refresh=0))  # no cache: nothing kept
     assert scene.guide_cache.builds == 4
+
+
+def test_projective_guiding_beats_uniform_on_a_near_specular_reflection():
+    """The projective-sampling paper's test scene (scenes/projective/sphere.json: a sphere seen
+    only in a GGX alpha = 0.005 plane in front of a large emitter), at equal boundary samples: the
+    projective grid and the octree must beat uniform sampling of the boundary sample space
+    (measured here over 6 runs: uniform 1.25, projective grid 0.50, octree 1.20 relative RMSE; at 48x48 the gap
+    grows, docs/reports/projective/sphere.md)."""
+    with open(os.path.join(SCENES, "projective", "sphere.json")) as f:
+        d = json.load(f)
+    d["sensor"]["film"]["width"] = d["sensor"]["film"]["height"] = 24
+    scene = limn.load_dict(d)
+    name = "shape.center"
+    t = np.float32([1, 0, 0])
+    scene.set_differentiable([name])
+    ref = limn.fd(scene, {name: t}, eps=1e-2, spp=4096, seed=3)
+    rms = float(np.sqrt((ref ** 2).mean()))
+    def err(**kw):
+        runs = [quiet(scene.render_forward, {name: t}, spp=8, spp_boundary=32, seed=11 + 7 * k, **kw) for k in range(6)]
+        return float(np.sqrt(np.mean([((r - ref) ** 2).mean() for r in runs]))) / rms
+    uniform, grid, octree = err(guiding="none"), err(guiding="grid"), err(guiding="octree")
+    print(f"relative RMSE: uniform {uniform:.3f}, projective grid {grid:.3f}, octree {octree:.3f}")
+    assert grid < 0.7 * uniform, (grid, uniform)
+    assert octree < uniform, (octree, uniform)
