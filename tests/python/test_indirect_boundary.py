@@ -49,16 +49,27 @@ def compare(scene, name, t, spp_boundary, seeds=8, fd_spp=1024):
     return block_z(on, fd), block_z(off, fd)
 
 
+def check_term(scene, name, t, spp_boundary, off_at_least):
+    """The derivative along t agrees with FD with the indirect term (block |z| < 5) and does not
+    without it (some block beyond `off_at_least`)."""
+    scene.set_differentiable([name])
+    z_on, z_off = compare(scene, name, t, spp_boundary)
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > off_at_least, z_off
+
+
+def x_translation(scene, name):
+    t = np.zeros_like(scene.params[name])
+    t[:, 0] = 1.0
+    return t
+
+
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_moving_occluder_shadow(light, spp_boundary):
     scene = load(shadow_scene(light))
     name = "box.vertex_positions"
-    t = np.zeros_like(scene.params[name])
-    t[:, 0] = 1.0
-    scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, t, spp_boundary)
-    assert np.abs(z_on).max() < 5.0, z_on
-    assert np.abs(z_off).max() > 10, z_off  # the shadow's blocks are far off without the term
+    t = x_translation(scene, name)
+    check_term(scene, name, t, spp_boundary, 10)  # the shadow's blocks are far off without the term
     quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=spp_boundary)
     assert any("indirect boundary: " + str(spp_boundary) in line for line in scene.last_stats["summary"])
 
@@ -68,12 +79,7 @@ def test_moving_receiver_under_a_static_occluder(light, spp_boundary):
     """The floor rises under a static box: the boundary (the box's edges) does not move, the
     segments from the floor past it do (their end on the floor slides along the camera ray)."""
     scene = load(shadow_scene(light))
-    name = "floor.to_world.translation"
-    t = np.float32([0, 0, 1])
-    scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, t, spp_boundary)
-    assert np.abs(z_on).max() < 5.0, z_on
-    assert np.abs(z_off).max() > 10, z_off
+    check_term(scene, "floor.to_world.translation", np.float32([0, 0, 1]), spp_boundary, 10)
 
 
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
@@ -84,10 +90,7 @@ def test_self_shadowing_under_deformation(light, spp_boundary):
     name = "terrain.vertex_positions"
     t = np.zeros_like(scene.params[name])
     t[:, 2] = scene.params[name][:, 2]  # heights scale up
-    scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, t, spp_boundary)
-    assert np.abs(z_on).max() < 5.0, z_on
-    assert np.abs(z_off).max() > 10, z_off
+    check_term(scene, name, t, spp_boundary, 10)
 
 
 def glossy_scene(emitter_reflectance):
@@ -103,13 +106,7 @@ def test_silhouette_seen_in_a_glossy_reflection(emitter_reflectance):
     observing vertex for bounded paths. (It was ~5e-4 of the peak off while the jump also counted
     the cube's own radiance, see test_emitting_occluder_seen_in_a_glossy_reflection.)"""
     scene = load(glossy_scene(emitter_reflectance))
-    name = "shape.vertex_positions"
-    t = np.zeros_like(scene.params[name])
-    t[:, 0] = 1.0
-    scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, t, 512)
-    assert np.abs(z_on).max() < 5.0, z_on
-    assert np.abs(z_off).max() > 6, z_off
+    check_term(scene, "shape.vertex_positions", x_translation(scene, "shape.vertex_positions"), 512, 6)
 
 
 def test_emitting_occluder_seen_in_a_glossy_reflection():
@@ -118,13 +115,7 @@ def test_emitting_occluder_seen_in_a_glossy_reflection():
     background alone; counting the cube's own radiance in the jump as well (L_fg - L_bg, right only
     for directions held fixed) put block z-scores above 10 here."""
     scene = load(validation("emitting_occluder_reflection"))
-    name = "shape.vertex_positions"
-    t = np.zeros_like(scene.params[name])
-    t[:, 0] = 1.0
-    scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, t, 512)
-    assert np.abs(z_on).max() < 5.0, z_on
-    assert np.abs(z_off).max() > 6, z_off
+    check_term(scene, "shape.vertex_positions", x_translation(scene, "shape.vertex_positions"), 512, 6)
 
 
 def test_backward_matches_forward_with_all_terms():
@@ -150,33 +141,31 @@ def test_moving_sphere_shadow(light, spp_boundary, name, t):
     its radius; with point lights through the light's silhouette circle on the sphere."""
     scene = load(validation("sphere_occluder_" + light))
     t = np.float32(t)
-    scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, t, spp_boundary)
-    assert np.abs(z_on).max() < 5.0, z_on
-    assert np.abs(z_off).max() > 10, z_off
+    check_term(scene, name, t, spp_boundary, 10)
     quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=spp_boundary)
     assert any("1 sphere surfaces" in line for line in scene.last_stats["summary"]), scene.last_stats["summary"]
 
 
 def test_sphere_seen_in_a_glossy_reflection():
     scene = load(validation("sphere_glossy_reflection"))
-    name = "shape.center"
+    check_term(scene, "shape.center", np.float32([1, 0, 0]), 512, 6)
+
+
+def area_shadow_with_fd():
+    """The box over the floor under the area light, its x translation and 8 FD images."""
+    scene = load(shadow_scene(AREA))
+    name = "box.vertex_positions"
+    t = x_translation(scene, name)
     scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, np.float32([1, 0, 0]), 512)
-    assert np.abs(z_on).max() < 5.0, z_on
-    assert np.abs(z_off).max() > 6, z_off
+    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=1024, seed=k, cache=False) for k in range(8)])
+    return scene, name, t, fd
 
 
 def test_grid_guiding_agrees_and_lowers_the_error():
     """Area-light shadow: the path-space baseline grid (random points per cell) must agree with
     finite differences and, at equal boundary samples, beat uniform sampling of the boundary
     sample space."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = np.zeros_like(scene.params[name])
-    t[:, 0] = 1.0
-    scene.set_differentiable([name])
-    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=1024, seed=k, cache=False) for k in range(8)])
+    scene, name, t, fd = area_shadow_with_fd()
     ref = fd.mean(0)
     def run(guiding, k):
         return quiet(scene.render_forward, {name: t}, spp=16, spp_primary=16, spp_boundary=64, guiding=guiding,
@@ -197,12 +186,7 @@ def test_projective_guiding_agrees_with_fd(guiding):
     """Projective guides (seeds projected onto silhouettes) are unbiased: with many boundary
     samples they agree with finite differences block by block, and the summary says how they
     were built."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = np.zeros_like(scene.params[name])
-    t[:, 0] = 1.0
-    scene.set_differentiable([name])
-    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=1024, seed=k, cache=False) for k in range(8)])
+    scene, name, t, fd = area_shadow_with_fd()
     runs = np.stack([quiet(scene.render_forward, {name: t}, spp=16, spp_primary=64, spp_boundary=1024, guiding=guiding,
                            guiding_seeds=32, seed=90 + k) for k in range(8)])
     line = next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
@@ -217,8 +201,7 @@ def test_guides_are_reused_across_calls_until_refresh_or_motion():
     occluder by more than the threshold, or other settings, rebuild it."""
     scene = load(shadow_scene(AREA))
     name = "box.vertex_positions"
-    t = np.zeros_like(scene.params[name])
-    t[:, 0] = 1.0
+    t = x_translation(scene, name)
     scene.set_differentiable([name])
     opts = dict(spp=2, spp_boundary=8, guiding="octree", guide_refresh=3)
     for k in range(4):
@@ -277,8 +260,7 @@ def test_guided_gradients_stay_finite_on_awkward_meshes(guiding):
     d["grazing"] = {"type": "point", "position": [3.5, 0.0, 1.05], "intensity": 20.0}
     scene = load(d)
     name = "sheet.vertex_positions"
-    t = np.zeros_like(scene.params[name])
-    t[:, 0] = 1.0
+    t = x_translation(scene, name)
     scene.set_differentiable([name])
     runs = np.stack([quiet(scene.render_forward, {name: t}, spp=8, spp_primary=32, spp_boundary=256, guiding=guiding,
                            guiding_seeds=8, seed=30 + k) for k in range(8)])
