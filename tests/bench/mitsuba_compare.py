@@ -4,17 +4,20 @@ difference reference (limn's, cached; the primal images are compared first so th
 means the same for both). Mitsuba is a comparison peer for this report only, never a dependency.
 
 Regenerate (after ./bootstrap.sh):
-    .venv/bin/pip install mitsuba==3.5.2 && .venv/bin/python tests/bench/mitsuba_compare.py
+    .venv/bin/pip install mitsuba==3.7.1 && .venv/bin/python tests/bench/mitsuba_compare.py
 
-Mitsuba 3.5.2 (Dr.Jit 0.4.6): newer releases emit an LLVM intrinsic (fminimum) that Debian 12's
-LLVM 14/15 cannot compile for x86 ("LLVM ERROR: Cannot select"), and llvm_ad_rgb needs that LLVM.
+Mitsuba 3.7.1 (Dr.Jit 1.2.0): 3.9 emits an LLVM intrinsic (fminimum) that Debian 12's
+LLVM 14/15 cannot compile for x86 ("LLVM ERROR: Cannot select"), and 3.5-3.6 fail to compile
+prb_projective on meshes ("use of undefined value"); llvm_ad_rgb uses the system LLVM.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 import warnings
 
@@ -31,6 +34,7 @@ except ImportError:
 mi.set_variant("llvm_ad_rgb")
 
 SCENES = os.path.join(ROOT, "scenes", "projective")
+WORK = os.path.join(tempfile.gettempdir(), "limn_mitsuba_compare")  # reference and primal handed to the workers
 
 
 def transform(spec) -> mi.ScalarTransform4f:
@@ -104,6 +108,34 @@ def mitsuba_gradient(scene, params, key, base, kind, spp, seed):
     return out[..., :3], seconds
 
 
+def worker(name: str, guiding: str, budgets: list[int], runs: int) -> int:
+    """One Mitsuba configuration: prints {"ratio", "diff", "rows"} as JSON."""
+    with open(os.path.join(SCENES, name + ".json")) as f:
+        desc = json.load(f)
+    ref = np.load(os.path.join(WORK, "reference.npy"))
+    primal_limn = np.load(os.path.join(WORK, "primal.npy"))
+    rms = float(np.sqrt((ref ** 2).mean()))
+    msc = mi.load_dict(mitsuba_scene(desc, guiding, 4))
+    params = mi.traverse(msc)
+    kind = "sphere" if desc["shape"]["type"] == "sphere" else "mesh"
+    key = "shape.to_world" if kind == "sphere" else "shape.vertex_positions"
+    base = type(params[key])(params[key])
+    primal_mi = np.array(mi.render(msc, spp=1024, seed=5))[..., :3].astype(np.float64)
+    ratio = float(primal_mi.mean() / primal_limn.mean())
+    diff = float(np.sqrt(((primal_mi - primal_limn) ** 2).mean()) / np.sqrt((primal_limn ** 2).mean()))
+    mitsuba_gradient(msc, params, key, base, kind, 4, 999)  # JIT warm-up
+    rows = []
+    for b in budgets:
+        errs, secs = [], []
+        for r in range(runs):
+            g, s = mitsuba_gradient(msc, params, key, base, kind, b, 7 + 100 * r)
+            errs.append(((g - ref) ** 2).mean())
+            secs.append(s)
+        rows.append((f"Mitsuba {guiding}", b, float(np.mean(secs)), float(np.sqrt(np.mean(errs))) / rms))
+    print(json.dumps({"ratio": ratio, "diff": diff, "rows": rows}), flush=True)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenes", nargs="+", default=["sphere", "torus", "cube_hole"])
@@ -113,12 +145,16 @@ def main() -> int:
     ap.add_argument("--fd-spp", type=int, default=16384)
     ap.add_argument("--runs", type=int, default=2)
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "reports", "projective", "mitsuba.md"))
+    ap.add_argument("--worker", nargs=2, metavar=("SCENE", "GUIDING"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.worker:
+        return worker(args.worker[0], args.worker[1], args.budgets, args.runs)
+    os.makedirs(WORK, exist_ok=True)
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
     warnings.simplefilter("ignore")
     lines = ["# limn and Mitsuba 3 on the projective-sampling test scenes", "",
-             "Regenerate: `.venv/bin/pip install mitsuba==3.5.2 && .venv/bin/python tests/bench/mitsuba_compare.py` "
-             "(3.5.2: newer Mitsuba releases need a newer LLVM than Debian 12's for llvm_ad_rgb)", "",
+             "Regenerate: `.venv/bin/pip install mitsuba==3.7.1 && .venv/bin/python tests/bench/mitsuba_compare.py` "
+             "(3.7.1: 3.9 needs a newer LLVM than Debian 12's, 3.5-3.6 fail on meshes)", "",
              f"Mitsuba {mi.__version__} (`llvm_ad_rgb`, integrator `prb_projective`, forward mode) and limn on the same "
              "machine in one run (2 cores, shared); one finite-difference reference per scene (limn, eps 0.01, "
              f"{args.fd_spp} spp, cached); relative RMSE = RMSE / RMS of the reference, root mean square over "
@@ -141,24 +177,24 @@ def main() -> int:
         rms = float(np.sqrt((ref ** 2).mean()))
         rows = []
         primal_limn = scene.render(spp=1024, seed=5).astype(np.float64)
+        np.save(os.path.join(WORK, "reference.npy"), ref)
+        np.save(os.path.join(WORK, "primal.npy"), primal_limn)
+        ratio = diff = float("nan")
+        failures = []
         for guiding in ("none", "grid", "octree"):
-            msc = mi.load_dict(mitsuba_scene(desc, guiding, 4))
-            params = mi.traverse(msc)
-            kind = "sphere" if desc["shape"]["type"] == "sphere" else "mesh"
-            key = "shape.to_world" if kind == "sphere" else "shape.vertex_positions"
-            base = type(params[key])(params[key])
+            # Each Mitsuba configuration in a process of its own: a Dr.Jit compiler failure aborts it.
+            cmd = [sys.executable, os.path.abspath(__file__), "--worker", name, guiding, "--runs", str(args.runs),
+                   "--budgets", *map(str, args.budgets)]
+            res = subprocess.run(cmd, capture_output=True, text=True)
+            out = [l[l.index('{"ratio"'):] for l in res.stdout.splitlines() if '{"ratio"' in l]  # after Mitsuba's colour codes
+            if res.returncode != 0 or not out:
+                err = [l for l in (res.stdout + res.stderr).splitlines() if "error" in l.lower() or "failure" in l.lower()]
+                failures.append(f"Mitsuba with guiding '{guiding}' failed (exit {res.returncode}): {(err or ['no output'])[0].strip()[:200]}")
+                continue
+            r = json.loads(out[-1])
             if guiding == "none":
-                primal_mi = np.array(mi.render(msc, spp=1024, seed=5))[..., :3].astype(np.float64)
-                ratio = primal_mi.mean() / primal_limn.mean()
-                diff = np.sqrt(((primal_mi - primal_limn) ** 2).mean()) / np.sqrt((primal_limn ** 2).mean())
-            mitsuba_gradient(msc, params, key, base, kind, 4, 999)  # JIT warm-up
-            for b in args.budgets:
-                errs, secs = [], []
-                for r in range(args.runs):
-                    g, s = mitsuba_gradient(msc, params, key, base, kind, b, 7 + 100 * r)
-                    errs.append(((g - ref) ** 2).mean())
-                    secs.append(s)
-                rows.append((f"Mitsuba {guiding}", b, float(np.mean(secs)), float(np.sqrt(np.mean(errs))) / rms))
+                ratio, diff = r["ratio"], r["diff"]
+            rows += [tuple(x) for x in r["rows"]]
         for label, opts in (("limn none", {"guiding": "none"}), ("limn projective grid", {"guiding": "grid"}),
                             ("limn octree", {"guiding": "octree"})):
             for b in args.limn_budgets:
@@ -169,7 +205,9 @@ def main() -> int:
                     secs.append(scene.last_stats["seconds"])
                 rows.append((label, b, float(np.mean(secs)), float(np.sqrt(np.mean(errs))) / rms))
         lines += [f"## {name}", "",
-                  f"Primal images at 1024 spp: Mitsuba / limn mean {ratio:.4f}, relative RMS difference {diff:.4f}.", "",
+                  f"Primal images at 1024 spp: Mitsuba / limn mean {ratio:.4f}, relative RMS difference {diff:.4f}.", ""]
+        lines += [f"- {f}" for f in failures] + ([""] if failures else [])
+        lines += [
                   "| renderer, guiding | budget (spp) | time (s) | relative RMSE |", "|---|---|---|---|"]
         lines += [f"| {r[0]} | {r[1]} | {r[2]:.3f} | {r[3]:.4f} |" for r in rows]
         lines.append("")
