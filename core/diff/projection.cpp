@@ -269,7 +269,7 @@ std::optional<Projection> Projector::snap(int shape, int f, const Vec3& xa, cons
 }
 
 std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceInteraction& hit, Pcg32& rng) const {
-  int f = hit.prim, taken = 0, jumps = 0;
+  int f = hit.prim, taken = 0;
   Vec3 p = hit.p;
   int seg = -1;
   if (m_mode != MeshProjection::Jump) seg = walk(hit.shape, xa, f, kWalkSteps, rng, taken);
@@ -279,19 +279,12 @@ std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceI
       const Mesh& m = m_scene.shapes[hit.shape].mesh();
       p = (m.vertex(i[0]) + m.vertex(i[1]) + m.vertex(i[2])) / 3.0f;
     }
-    if (jump(hit.shape, xa, f, p)) {
-      ++jumps;
+    if (jump(hit.shape, xa, f, p))
       seg = walk(hit.shape, xa, f, m_mode == MeshProjection::Jump ? 1 : kWalkSteps, rng, taken);
-    }
   }
   std::optional<Projection> r;
   if (seg >= 0) r = finish(seg, xa, hit.p, true, glm::normalize(xa - hit.p));
-  if (!r) r = snap(hit.shape, f, xa, p);
-  if (r) {
-    r->walk_steps = taken;
-    r->jumps = jumps;
-  }
-  return r;
+  return r ? r : snap(hit.shape, f, xa, p);
 }
 
 }  // namespace limn

@@ -24,7 +24,6 @@ struct Projection {
   int segment;       // its segment (edge or sphere) in the boundary space
   Vec3 xb, w;        // the boundary point and the direction from it towards (a slightly shifted) x_a
   bool found;        // a true silhouette; false: the snapped fallback
-  int walk_steps = 0, jumps = 0;
 };
 
 enum class MeshProjection { Walk, Jump, Hybrid };

@@ -228,6 +228,10 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
                           std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);
   float extent = 0.0f;
   const std::vector<float> geometry = moving_geometry(scene, params, extent);
+  // Calls on one scene may run at once (the scene lock is shared): the cache is looked at and
+  // replaced under a lock; building happens outside it.
+  static std::mutex cache_mutex;
+  std::unique_lock<std::mutex> lock(cache_mutex);
   if (cache && cache->guide && cache->key == key && cache->uses < opt.guide_refresh && cache->geometry.size() == geometry.size()) {
     float moved = 0.0f;
     for (size_t i = 0; i < geometry.size(); ++i) moved = std::max(moved, std::abs(geometry[i] - cache->geometry[i]));
@@ -242,9 +246,11 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
       return;
     }
   }
+  lock.unlock();
   const auto t0 = std::chrono::steady_clock::now();
   build_guide(scene, ib, opt, effective_max_depth(scene, opt.max_depth), terms);
   terms.guide_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  lock.lock();
   if (cache) {
     *cache = GuideCache{terms.guide, key, terms.guide_origin, geometry, extent, 1, terms.guide_seconds, cache->builds + 1, cache->reuses};
     terms.guide_reuse = " (kept for up to " + std::to_string(opt.guide_refresh) + " calls)";

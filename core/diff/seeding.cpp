@@ -33,10 +33,11 @@ std::vector<Projection> projected_seeds(const Scene& scene, const Projector& pro
         for (uint64_t j = blk * kBlock; j < std::min(paths, (blk + 1) * kBlock); ++j) {
           Pcg32 rng = pixel_rng(mix_bits(seed ^ 0x7365656473ULL), j);
           const Vec2 film(rng.next_float() * scene.camera.width, rng.next_float() * scene.camera.height);
+          const Ray camera_ray = scene.camera.generate_ray(film);
+          Vec3 wi = -camera_ray.d;  // towards the previous vertex
           SurfaceInteraction si;
-          Vec3 wi = -scene.camera.generate_ray(film).d;  // towards the previous vertex
           ++rr;
-          if (!scene.intersect(scene.camera.generate_ray(film), si)) continue;
+          if (!scene.intersect(camera_ray, si)) continue;
           auto add = [&](const Vec3& xa, const SurfaceInteraction& hit) {
             ++seg;
             if (auto p = projector.project(xa, hit, rng)) out.push_back(*p);
