@@ -1,10 +1,10 @@
 // render_forward / render_backward: derivative images and parameter gradients.
 //
-// Implemented: the interior term (interior.h) for every parameter kind, the primary-visibility
-// boundary term (primary.h) for meshes and spheres, and the perimeter part of the indirect
-// boundary term (indirect.h: shadows and silhouettes seen in reflections) for meshes, unguided.
-// Guiding: "none" or "grid" (uniform grid, no projection yet). Not implemented yet: the indirect
-// term of spheres (curvature part of Eq. 4); the summary says what was computed and what is missing.
+// Terms: the interior term (interior.h) for every parameter kind, the primary-visibility boundary
+// term (primary.h) for meshes and spheres, and the indirect boundary term (indirect.h: Eq. 4's
+// perimeter part for mesh edges and interior part for spheres). Guiding of the indirect term:
+// "none", "grid" (baseline or projective) or "octree" (core/guiding/), optionally kept between
+// calls (GuideCache). The summary says what was computed and what was skipped.
 #pragma once
 #include <functional>
 #include <string>
