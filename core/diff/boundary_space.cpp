@@ -58,7 +58,7 @@ BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_s
           m_measure.push_back(4.0f * kPi * len);
           (moving ? moving_measure : static_measure) += m_measure.back();
         }
-      } else if (pass == 1 && !shape.is_mesh()) {
+      } else if (pass == 1 && shape.is_sphere()) {  // heightfields: their own estimator (core/heightfield)
         m_segments.push_back({BoundarySegment::Kind::SphereSurface, si, moving});
         m_measure.push_back(8.0f * kPi * kPi * shape.sphere().radius);
         (moving ? moving_measure : static_measure) += m_measure.back();

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include "core/heightfield/diff_heightfield.h"
 
 namespace limn {
 
@@ -18,7 +19,8 @@ DiffParams::DiffParams(const Scene& scene, const std::vector<std::string>& names
     m_params.push_back({p->name, p->kind, p->index, m_slots, p->size(), p->shape});
     m_slots += p->size();
     const bool geometric = p->kind == Parameter::Kind::VertexPositions || p->kind == Parameter::Kind::SphereCenter ||
-                           p->kind == Parameter::Kind::SphereRadius || p->kind == Parameter::Kind::Translation;
+                           p->kind == Parameter::Kind::SphereRadius || p->kind == Parameter::Kind::Heights ||
+                           p->kind == Parameter::Kind::Translation;
     if (geometric) {
       m_geometry = true;
       if (std::find(m_moving_shapes.begin(), m_moving_shapes.end(), p->index) == m_moving_shapes.end())
@@ -58,7 +60,15 @@ ad::Var diff_sphere_radius(const Scene& scene, const DiffParams& params, PathInp
 
 ad::V3<ad::Var> diff_surface_point(const Scene& scene, const DiffParams& params, PathInputs& in, const SurfaceInteraction& si) {
   const Shape& sh = scene.shapes[si.shape];
-  if (!sh.is_mesh()) {
+  if (sh.is_heightfield()) {
+    const DiffHeightfieldFrame F(scene, params, in, si.shape);
+    const Heightfield& hf = sh.heightfield();
+    const ad::Var x(hf.local_x(si.bary.x)), y(hf.local_y(si.bary.y));
+    ad::Var z, zx, zy;
+    F.height(in, x, y, z, zx, zy);
+    return F.to_world_point(ad::V3<ad::Var>(x, y, z));
+  }
+  if (sh.is_sphere()) {
     const ad::V3<ad::Var> n(ad::Var(si.ng.x), ad::Var(si.ng.y), ad::Var(si.ng.z));
     return diff_sphere_center(scene, params, in, si.shape) + n * diff_sphere_radius(scene, params, in, si.shape);
   }
@@ -70,7 +80,7 @@ ad::V3<ad::Var> diff_surface_point(const Scene& scene, const DiffParams& params,
 
 bool moves_geometry(const DiffParams& params, int shape) {
   for (Parameter::Kind k : {Parameter::Kind::VertexPositions, Parameter::Kind::SphereCenter, Parameter::Kind::SphereRadius,
-                            Parameter::Kind::Translation})
+                            Parameter::Kind::Heights, Parameter::Kind::Translation})
     if (params.slot(k, shape) >= 0) return true;
   return false;
 }

@@ -78,7 +78,7 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, i
         m_curves.push_back({si, a, b, len});
         weights.push_back(len);
       }
-    } else {
+    } else if (shape.is_sphere()) {
       const Sphere& s = shape.sphere();
       ad::V3<double> q, e1, e2;
       double rho;

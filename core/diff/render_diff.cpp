@@ -203,6 +203,8 @@ std::vector<float> moving_geometry(const Scene& scene, const DiffParams& params,
     const Shape& sh = scene.shapes[si];
     if (sh.is_mesh()) {
       g.insert(g.end(), sh.mesh().positions.begin(), sh.mesh().positions.end());
+    } else if (sh.is_heightfield()) {
+      continue;  // never guided: the heightfield estimator has no boundary sample space
     } else {
       const Sphere& sp = sh.sphere();
       g.insert(g.end(), {sp.center.x, sp.center.y, sp.center.z, sp.radius});

@@ -60,15 +60,27 @@ std::string EmbreeDevice::last_error() {
   return g_last_error;
 }
 
-// ---- sphere user geometry ---------------------------------------------------------------------
+// ---- user geometry: spheres and heightfields, with our exact intersectors --------------------------
 namespace {
+void user_bounds(RTCBounds* b, const Vec3& lo, const Vec3& hi) {
+  b->lower_x = lo.x; b->lower_y = lo.y; b->lower_z = lo.z;
+  b->upper_x = hi.x; b->upper_y = hi.y; b->upper_z = hi.z;
+}
+
 void sphere_bounds(const RTCBoundsFunctionArguments* args) {
   const Sphere& s = *static_cast<const Sphere*>(args->geometryUserPtr);
-  RTCBounds* b = args->bounds_o;
   // Widened by a few ulps: the box is rounded to float, the intersector works in double.
   const float r = s.radius * (1.0f + 1e-6f) + 1e-6f * max_component(glm::abs(s.center));
-  b->lower_x = s.center.x - r; b->lower_y = s.center.y - r; b->lower_z = s.center.z - r;
-  b->upper_x = s.center.x + r; b->upper_y = s.center.y + r; b->upper_z = s.center.z + r;
+  user_bounds(args->bounds_o, s.center - Vec3(r), s.center + Vec3(r));
+}
+
+void heightfield_bounds(const RTCBoundsFunctionArguments* args) {
+  const Heightfield& h = *static_cast<const Heightfield*>(args->geometryUserPtr);
+  Vec3 lo, hi;
+  h.bounds(lo, hi);
+  // The same few-ulp widening as spheres: the surface is evaluated in double.
+  const Vec3 pad = 1e-6f * (glm::abs(lo) + glm::abs(hi) + Vec3(1e-3f));
+  user_bounds(args->bounds_o, lo - pad, hi + pad);
 }
 
 Ray ray_from_n(RTCRayN* ray, unsigned N, unsigned i) {
@@ -80,20 +92,21 @@ Ray ray_from_n(RTCRayN* ray, unsigned N, unsigned i) {
   return r;
 }
 
-void sphere_intersect(const RTCIntersectFunctionNArguments* args) {
-  const Sphere& s = *static_cast<const Sphere*>(args->geometryUserPtr);
+// Shape::intersect(ray, t) for Embree; the surface record is rebuilt by Accel::intersect.
+template <typename G>
+void user_intersect(const RTCIntersectFunctionNArguments* args) {
+  const G& g = *static_cast<const G*>(args->geometryUserPtr);
   RTCRayN* ray = RTCRayHitN_RayN(args->rayhit, args->N);
   RTCHitN* hit = RTCRayHitN_HitN(args->rayhit, args->N);
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
     const Ray r = ray_from_n(ray, args->N, i);
     float t;
-    if (!s.intersect(r, t)) continue;
-    const Vec3 n = r(t) - s.center;
+    if (!g.intersect(r, t)) continue;
     RTCRayN_tfar(ray, args->N, i) = t;
-    RTCHitN_Ng_x(hit, args->N, i) = n.x;
-    RTCHitN_Ng_y(hit, args->N, i) = n.y;
-    RTCHitN_Ng_z(hit, args->N, i) = n.z;
+    RTCHitN_Ng_x(hit, args->N, i) = 0.0f;
+    RTCHitN_Ng_y(hit, args->N, i) = 0.0f;
+    RTCHitN_Ng_z(hit, args->N, i) = 1.0f;
     RTCHitN_u(hit, args->N, i) = 0.0f;
     RTCHitN_v(hit, args->N, i) = 0.0f;
     RTCHitN_primID(hit, args->N, i) = args->primID;
@@ -102,12 +115,13 @@ void sphere_intersect(const RTCIntersectFunctionNArguments* args) {
   }
 }
 
-void sphere_occluded(const RTCOccludedFunctionNArguments* args) {
-  const Sphere& s = *static_cast<const Sphere*>(args->geometryUserPtr);
+template <typename G>
+void user_occluded(const RTCOccludedFunctionNArguments* args) {
+  const G& g = *static_cast<const G*>(args->geometryUserPtr);
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
     float t;
-    if (s.intersect(ray_from_n(args->ray, args->N, i), t)) RTCRayN_tfar(args->ray, args->N, i) = -kInfinity;
+    if (g.intersect(ray_from_n(args->ray, args->N, i), t)) RTCRayN_tfar(args->ray, args->N, i) = -kInfinity;
   }
 }
 
@@ -139,10 +153,17 @@ Accel::Accel(std::vector<Shape>& shapes) : m_shapes(shapes) {
     } else {
       g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
       rtcSetGeometryUserPrimitiveCount(g, 1);
-      rtcSetGeometryUserData(g, &shapes[i].sphere());
-      rtcSetGeometryBoundsFunction(g, sphere_bounds, nullptr);
-      rtcSetGeometryIntersectFunction(g, sphere_intersect);
-      rtcSetGeometryOccludedFunction(g, sphere_occluded);
+      if (shapes[i].is_sphere()) {
+        rtcSetGeometryUserData(g, &shapes[i].sphere());
+        rtcSetGeometryBoundsFunction(g, sphere_bounds, nullptr);
+        rtcSetGeometryIntersectFunction(g, user_intersect<Sphere>);
+        rtcSetGeometryOccludedFunction(g, user_occluded<Sphere>);
+      } else {
+        rtcSetGeometryUserData(g, &shapes[i].heightfield());
+        rtcSetGeometryBoundsFunction(g, heightfield_bounds, nullptr);
+        rtcSetGeometryIntersectFunction(g, user_intersect<Heightfield>);
+        rtcSetGeometryOccludedFunction(g, user_occluded<Heightfield>);
+      }
     }
     rtcCommitGeometry(g);
     rtcAttachGeometryByID(m_scene, g, unsigned(i));  // geomID == shape index
@@ -193,7 +214,8 @@ bool Accel::intersect(const Ray& ray, SurfaceInteraction& si) const {
   si.t = rh.ray.tfar;
   si.shape = int(rh.hit.geomID);
   if (shape.is_mesh()) shape.mesh().fill_interaction(int(rh.hit.primID), rh.hit.u, rh.hit.v, si);
-  else shape.sphere().fill_interaction(ray(si.t), si);
+  else if (shape.is_sphere()) shape.sphere().fill_interaction(ray(si.t), si);
+  else shape.heightfield().fill_interaction_world(ray(si.t), si);
   return true;
 }
 

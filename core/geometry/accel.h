@@ -1,5 +1,6 @@
 // Embree 3 acceleration structure over the scene's shapes: triangle meshes as Embree triangle
-// geometry (refit when vertices move), spheres as user geometry with our exact intersector.
+// geometry (refit when vertices move), spheres and heightfields as user geometry with our own
+// intersectors (heightfields: maximum-mipmap traversal, heightfield.h).
 #pragma once
 #include <embree3/rtcore.h>
 #include <memory>

@@ -30,7 +30,7 @@ const std::map<std::string, Category>& known_types() {
       {"independent", Category::Sampler},  {"stratified", Category::Sampler},    {"multijitter", Category::Sampler},
       {"box", Category::Filter},           {"gaussian", Category::Filter},       {"tent", Category::Filter},
       {"path", Category::Integrator},      {"direct", Category::Integrator},     {"obj", Category::Shape},
-      {"ply", Category::Shape},            {"mesh", Category::Shape},            {"sphere", Category::Shape},
+      {"ply", Category::Shape},            {"mesh", Category::Shape},            {"sphere", Category::Shape}, {"heightfield", Category::Shape},
       {"rectangle", Category::Shape},      {"cube", Category::Shape},            {"diffuse", Category::Bsdf},
       {"conductor", Category::Bsdf},       {"roughconductor", Category::Bsdf},   {"dielectric", Category::Bsdf},
       {"roughdielectric", Category::Bsdf}, {"twosided", Category::Bsdf},         {"area", Category::Emitter},
@@ -553,6 +553,52 @@ std::string nested_id(const Props& p, const json& child, const std::string& owne
   return id;
 }
 
+// Heights from "filename" (any OpenImageIO format, first channel, no sRGB decoding) or "data" (a 2D
+// array, row 0 at the far edge y = +depth/2 as in an image), scaled by "height_scale".
+Heightfield load_heightfield(const Props& p, const Transform& to_world) {
+  Heightfield hf;
+  if (p.has("filename") == p.has("data")) p.fail("needs exactly one of 'filename' (an image) or 'data' (a 2D array of heights)");
+  if (p.has("filename")) {
+    const std::string path = p.file("filename");
+    Bitmap bm;
+    try {
+      bm = read_image(path, true);
+    } catch (const std::invalid_argument& e) {
+      p.fail(e.what());
+    }
+    hf.nx = bm.width;
+    hf.ny = bm.height;
+    hf.heights.resize(size_t(bm.width) * bm.height);
+    for (size_t i = 0; i < hf.heights.size(); ++i) hf.heights[i] = bm.rgb[3 * i];
+  } else {
+    const ArrayData a = p.array("data");
+    if (a.shape.size() != 2) p.fail("'data' must be a 2D array (rows, columns) of heights");
+    hf.ny = int(a.shape[0]);
+    hf.nx = int(a.shape[1]);
+    hf.heights.assign(a.values.begin(), a.values.end());
+  }
+  if (hf.nx < 2 || hf.ny < 2)
+    p.fail("needs at least 2 x 2 heights (got " + std::to_string(hf.ny) + " rows x " + std::to_string(hf.nx) + " columns)");
+  for (size_t i = 0; i < hf.heights.size(); ++i)
+    if (!std::isfinite(hf.heights[i]))
+      p.fail("height at row " + std::to_string(i / hf.nx) + ", column " + std::to_string(i % hf.nx) + " is not finite");
+  Vec2 size(2.0f);
+  if (p.has("size")) {
+    const std::vector<double> v = p.numbers(p.raw("size"), "size", 2);
+    size = Vec2(float(v[0]), float(v[1]));
+  }
+  hf.width = size.x;
+  hf.depth = size.y;
+  if (!(hf.width > 0.0f && hf.depth > 0.0f && std::isfinite(hf.width) && std::isfinite(hf.depth)))
+    p.fail("size must be two positive numbers [width, depth] (got [" + std::to_string(hf.width) + ", " + std::to_string(hf.depth) + "])");
+  hf.height_scale = p.number("height_scale", 1.0f);
+  if (!(hf.height_scale > 0.0f && std::isfinite(hf.height_scale)))
+    p.fail("height_scale must be finite and > 0 (got " + std::to_string(hf.height_scale) + ")");
+  check_similarity(p, to_world, hf.scale);
+  hf.world_from_local = to_world;
+  return hf;
+}
+
 void load_shape(Context& ctx, const json& j, const std::string& id) {
   const std::string type = type_of(j);
   Props p(ctx, j, describe("shape", id, type));
@@ -572,6 +618,8 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       s.radius *= scale;
     }
     shape.geometry = s;
+  } else if (type == "heightfield") {
+    shape.geometry = load_heightfield(p, to_world);
   } else {
     MeshData data;
     bool face_normals = p.boolean("face_normals", type == "rectangle" || type == "cube");
@@ -618,6 +666,7 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       shape.bsdf = add_bsdf(ctx, load_bsdf(ctx, *child, nested_id(p, *child, id)));
     } else if (cat->second == Category::Emitter) {
       if (ctype != "area") p.fail("only 'area' emitters can be attached to a shape (got '" + ctype + "' under '" + key + "')");
+      if (type == "heightfield") p.fail("a heightfield cannot be an area emitter (under '" + key + "')");
       if (shape.emitter >= 0) p.fail("has more than one emitter");
       Props ep(ctx, *child, describe("emitter", id, ctype));
       AreaEmitter a;

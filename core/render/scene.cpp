@@ -14,8 +14,10 @@ void Scene::build() {
     if (std::holds_alternative<ConstantEmitter>(emitters[i].model) || std::holds_alternative<EnvmapEmitter>(emitters[i].model))
       infinite_emitters.push_back(int(i));
   }
-  for (Shape& s : shapes)
+  for (Shape& s : shapes) {
     if (s.is_mesh()) s.mesh().update_derived();
+    if (s.is_heightfield()) s.heightfield().build_mipmap();
+  }
   m_accel = std::make_unique<Accel>(shapes);
   collect_parameters();
   m_snapshots.clear();
@@ -29,6 +31,9 @@ void Scene::collect_parameters() {
     if (s.is_mesh()) {
       Mesh& m = s.mesh();
       m_params.push_back({s.id + ".vertex_positions", Parameter::Kind::VertexPositions, int(i), m.positions.data(), {m.vertex_count(), 3}});
+    } else if (s.is_heightfield()) {
+      Heightfield& hf = s.heightfield();
+      m_params.push_back({s.id + ".heights", Parameter::Kind::Heights, int(i), hf.heights.data(), {size_t(hf.ny), size_t(hf.nx)}});
     } else {
       Sphere& sp = s.sphere();
       m_params.push_back({s.id + ".center", Parameter::Kind::SphereCenter, int(i), &sp.center.x, {3}});
@@ -93,6 +98,14 @@ void Scene::validate_parameter(const Parameter& p) const {
           throw std::invalid_argument(where + ": " + (p.kind == Parameter::Kind::SphereCenter ? "center" : "vertex " + std::to_string(i / 3)) +
                                       " is not finite (" + format_values(p.data + i, 3) + ")");
       break;
+    case Parameter::Kind::Heights: {
+      const int nx = shapes[p.index].heightfield().nx;
+      for (size_t i = 0; i < n; ++i)
+        if (!std::isfinite(p.data[i]))
+          throw std::invalid_argument(where + ": height at row " + std::to_string(i / nx) + ", column " + std::to_string(i % nx) +
+                                      " is not finite (" + std::to_string(p.data[i]) + ")");
+      break;
+    }
     case Parameter::Kind::SphereRadius:
     case Parameter::Kind::Alpha:
       if (!(std::isfinite(p.data[0]) && p.data[0] > 0.0f))
@@ -111,6 +124,10 @@ void Scene::apply_parameter(const Parameter& p) {
   switch (p.kind) {
     case Parameter::Kind::VertexPositions:
       shapes[p.index].mesh().update_derived();
+      m_accel->shape_changed(p.index);
+      break;
+    case Parameter::Kind::Heights:
+      shapes[p.index].heightfield().update_mipmap();  // only the cells around changed heights
       m_accel->shape_changed(p.index);
       break;
     case Parameter::Kind::SphereCenter:
@@ -153,6 +170,11 @@ std::vector<std::string> Scene::update() {
       const Parameter& p = m_params[i];
       const Vec3 delta = Vec3(p.data[0], p.data[1], p.data[2]) - Vec3(m_snapshots[i][0], m_snapshots[i][1], m_snapshots[i][2]);
       Shape& sh = shapes[p.index];
+      if (sh.is_heightfield()) {
+        Heightfield& hf = sh.heightfield();
+        hf.world_from_local = Transform::translate(Vec3d(delta)) * hf.world_from_local;
+        m_accel->shape_changed(p.index);
+      }
       const Parameter::Kind target = sh.is_mesh() ? Parameter::Kind::VertexPositions : Parameter::Kind::SphereCenter;
       for (size_t j = 0; j < m_params.size(); ++j)
         if (m_params[j].kind == target && m_params[j].index == p.index) {
@@ -165,7 +187,7 @@ std::vector<std::string> Scene::update() {
     apply_parameter(m_params[i]);
     std::memcpy(m_snapshots[i].data(), m_params[i].data, m_snapshots[i].size() * sizeof(float));
     geometry |= m_params[i].kind == Parameter::Kind::VertexPositions || m_params[i].kind == Parameter::Kind::SphereCenter ||
-                m_params[i].kind == Parameter::Kind::SphereRadius;
+                m_params[i].kind == Parameter::Kind::SphereRadius || m_params[i].kind == Parameter::Kind::Heights;
     names.push_back(m_params[i].name);
   }
   if (geometry) m_accel->commit();

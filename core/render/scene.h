@@ -28,7 +28,7 @@ struct IntegratorSettings {
 
 // An editable parameter: a float view into scene memory plus what must happen when it changes.
 struct Parameter {
-  enum class Kind { VertexPositions, SphereCenter, SphereRadius, Translation, Reflectance, Alpha, EmitterValue };
+  enum class Kind { VertexPositions, SphereCenter, SphereRadius, Heights, Translation, Reflectance, Alpha, EmitterValue };
   std::string name;            // "<owner id>.<field>"
   Kind kind;
   int index;                   // shape, bsdf or emitter index
