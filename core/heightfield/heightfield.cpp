@@ -142,16 +142,16 @@ struct Node {
 };
 }  // namespace
 
+bool Heightfield::node_span(int l, int i, int j, double ox, double oy, double dx, double dy, double& t0, double& t1) const {
+  const int c_lo = i << l, c_hi = std::min((i + 1) << l, cells_x());
+  const int r_lo = j << l, r_hi = std::min((j + 1) << l, cells_y());
+  if (c_lo >= cells_x() || r_lo >= cells_y()) return false;
+  // Rows grow towards -y.
+  return slab(ox, dx, local_x(c_lo), local_x(c_hi), t0, t1) && slab(oy, dy, local_y(r_hi), local_y(r_lo), t0, t1);
+}
+
 bool Heightfield::intersect_local(const Vec3d& o, const Vec3d& d, double tmin, double tmax, double& t_hit, size_t* cells) const {
-  // Node (l, i, j) covers level-0 cells [i 2^l, (i + 1) 2^l) x [j 2^l, (j + 1) 2^l).
-  auto node_range = [&](int l, int i, int j, double& t0, double& t1) {
-    const int c_lo = i << l, c_hi = std::min((i + 1) << l, cells_x());
-    const int r_lo = j << l, r_hi = std::min((j + 1) << l, cells_y());
-    if (c_lo >= cells_x() || r_lo >= cells_y()) return false;
-    const double xa = local_x(c_lo), xb = local_x(c_hi);
-    const double ya = local_y(r_hi), yb = local_y(r_lo);  // rows grow towards -y
-    return slab(o.x, d.x, xa, xb, t0, t1) && slab(o.y, d.y, ya, yb, t0, t1);
-  };
+  auto node_range = [&](int l, int i, int j, double& t0, double& t1) { return node_span(l, i, j, o.x, o.y, d.x, d.y, t0, t1); };
   // Height tolerance: the bounds are floats, the surface is evaluated in double.
   const double eps = 1e-6 * std::max(1.0, double(std::max(std::abs(max_height()), std::abs(min_height()))));
   double best = tmax;

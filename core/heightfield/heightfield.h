@@ -74,6 +74,10 @@ struct Heightfield {
   // Returns the number of level-0 cells recomputed (0 when nothing changed).
   size_t update_mipmap();
 
+  // Parameter range [t0, t1] (narrowed in place) of the 2D line (ox, oy) + t (dx, dy) inside mipmap
+  // node (level l, column i, row j), which covers level-0 cells [i 2^l, (i+1) 2^l) x [j 2^l, ...).
+  bool node_span(int l, int i, int j, double ox, double oy, double dx, double dy, double& t0, double& t1) const;
+
   // Grid coordinates of a local (x, y), clamped to the domain.
   double grid_c(double x) const { return (x / width + 0.5) * (nx - 1); }
   double grid_r(double y) const { return (0.5 - y / depth) * (ny - 1); }

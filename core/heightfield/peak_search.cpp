@@ -1,0 +1,115 @@
+#include "core/heightfield/peak_search.h"
+
+#include <array>
+
+namespace limn {
+namespace {
+
+struct Node {
+  int level, i, j;
+  double t0, t1;
+};
+
+struct Sample {
+  double t, k;
+};
+
+}  // namespace
+
+std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_start, double k_stop,
+                                  const PeakSearchOptions& opt, PeakSearchStats* stats) {
+  std::vector<SlicePeak> peaks;
+  PeakSearchStats local_stats;
+  PeakSearchStats& st = stats ? *stats : local_stats;
+  // The part of the slice over the footprint.
+  double t_in = 0.0, t_out = 1e30;
+  const int top = int(hf.mip.size()) - 1;
+  if (!hf.node_span(top, 0, 0, o.x, o.y, d.x, d.y, t_in, t_out)) return peaks;
+  auto k_at = [&](double t) { return (hf.eval(o.x + t * d.x, o.y + t * d.y).z - o.z) / t; };
+
+  double k_run = k_start;
+  if (t_in > 0.0) {  // the origin is outside the footprint: the near edge hides what passes under it
+    const double k = k_at(t_in);
+    if (k > k_run && k < k_stop) peaks.push_back({t_in, k, true});
+    k_run = std::max(k_run, k);
+  }
+  // Slope samples along the slice, kept across adjacent cells to see maxima on cell borders;
+  // a skipped node breaks the run (everything in it is under the running maximum).
+  Sample prev2{0, -1e300}, prev1{0, -1e300};
+  int run = 0;
+  bool last_is_record = false;
+  double last_t = -1.0;
+  auto refine = [&](double a, double b) {  // golden-section maximum of k on [a, b]
+    constexpr double g = 0.6180339887498949;
+    double x1 = b - g * (b - a), x2 = a + g * (b - a), f1 = k_at(x1), f2 = k_at(x2);
+    for (int it = 0; it < 40; ++it) {  // 0.618^40 ~ 4e-9 of the bracket
+      if (f1 < f2) { a = x1; x1 = x2; f1 = f2; x2 = a + g * (b - a); f2 = k_at(x2); }
+      else { b = x2; x2 = x1; f2 = f1; x1 = b - g * (b - a); f1 = k_at(x1); }
+    }
+    return f1 > f2 ? Sample{x1, f1} : Sample{x2, f2};
+  };
+  auto add_sample = [&](const Sample& s) {
+    if (run >= 2 && prev1.k >= prev2.k && prev1.k > s.k) {  // a sampled local maximum at prev1
+      const Sample m = refine(prev2.t, s.t);
+      if (m.k > k_run && m.k < k_stop) peaks.push_back({m.t, m.k, false});
+      k_run = std::max(k_run, m.k);
+    }
+    last_is_record = s.k > k_run;
+    last_t = s.t;
+    k_run = std::max(k_run, s.k);
+    prev2 = prev1;
+    prev1 = s;
+    ++run;
+  };
+
+  const double z_max = hf.max_height();
+  // Slack for the skip test: bounds are floats, heights are evaluated in double.
+  const double eps = 1e-6 * std::max(1.0, std::max(std::abs(double(hf.max_height())), std::abs(double(hf.min_height()))));
+  const int n_sub = std::max(1, opt.samples_per_cell);
+  std::vector<Node> stack;
+  stack.reserve(64);
+  stack.push_back({top, 0, 0, t_in, t_out});
+  while (!stack.empty() && k_run < k_stop) {
+    const Node n = stack.back();
+    stack.pop_back();
+    ++st.nodes;
+    // Lowest point of the line o_z + k_run t over the node's span.
+    const double line_min = o.z + k_run * (k_run >= 0.0 ? n.t0 : n.t1);
+    if (k_run >= 0.0 && o.z + k_run * n.t0 > z_max + eps) break;  // the line is above everything that follows
+    const Heightfield::Level& L = hf.mip[n.level];
+    if (opt.use_mipmap && L.hi[size_t(n.j) * L.w + n.i] <= line_min - eps) {
+      run = 0;
+      last_is_record = false;
+      continue;
+    }
+    if (n.level > 0) {
+      std::array<Node, 4> kids;
+      int count = 0;
+      for (int b = 0; b < 2; ++b)
+        for (int a = 0; a < 2; ++a) {
+          double c0 = n.t0, c1 = n.t1;
+          const int ci = 2 * n.i + a, cj = 2 * n.j + b;
+          if (hf.node_span(n.level - 1, ci, cj, o.x, o.y, d.x, d.y, c0, c1) && c1 > c0) kids[count++] = {n.level - 1, ci, cj, c0, c1};
+        }
+      for (int a = 1; a < count; ++a)  // farthest first, so the nearest child is popped next
+        for (int b = a; b > 0 && kids[b - 1].t0 < kids[b].t0; --b) std::swap(kids[b - 1], kids[b]);
+      for (int c = 0; c < count; ++c) stack.push_back(kids[c]);
+      continue;
+    }
+    ++st.cells;
+    // Sub-steps of this cell; the cell's first point is the previous cell's last unless the run
+    // was broken, and t = 0 itself (the origin) is never a sample.
+    const bool continues = run > 0 && std::abs(prev1.t - n.t0) <= 1e-12 * std::max(1.0, n.t0);
+    for (int s = continues ? 1 : 0; s <= n_sub; ++s) {
+      const double t = n.t0 + (n.t1 - n.t0) * s / n_sub;
+      if (t <= 1e-9 * (hf.width + hf.depth)) continue;
+      add_sample({t, k_at(t)});
+    }
+  }
+  // The far edge is a silhouette when the slope still rises there.
+  if (k_run < k_stop && last_is_record && std::abs(last_t - t_out) <= 1e-9 * std::max(1.0, t_out))
+    peaks.push_back({t_out, prev1.k, true});
+  return peaks;
+}
+
+}  // namespace limn
