@@ -120,7 +120,8 @@ class Scene:
     DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "guiding_spp": 4,
                     "guiding_seeds": 32,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
-                    "guide_refresh": 0, "guide_refresh_threshold": 0.02, "max_depth": None, "threads": 0}
+                    "guide_refresh": 0, "guide_refresh_threshold": 0.02,
+                    "heightfield_mipmap": True, "heightfield_reparam": True, "theta_subrange": 0.0, "max_depth": None, "threads": 0}
 
     def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
         if not self._differentiable:
@@ -144,6 +145,8 @@ class Scene:
         for name in ("grid_resolution", "guiding_spp", "guiding_seeds", "octree_slices", "octree_leaf_samples"):
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
+        if not (0.0 <= float(opts["theta_subrange"]) < 180.0):
+            raise ValueError(f"theta_subrange must be in [0, 180) degrees (got {opts['theta_subrange']})")
         self.update()
         opts.update(spp_interior=interior, spp_primary=spp_primary, spp_boundary=spp_boundary, seed=seed)
         return opts
@@ -187,6 +190,14 @@ class Scene:
           it every call.
         - ``max_depth`` overrides the path integrator's longest path for every term;
           ``threads`` (0: all cores).
+
+        Scenes with a ``heightfield`` shape and differentiable geometry use the heightfield estimator
+        (Tong et al. 2023) instead of all three terms (``spp_interior`` paths per pixel; the boundary
+        sample counts and guiding options do not apply): ``heightfield_mipmap=False`` searches
+        discontinuities without the maximum mipmap (brute force, for comparison) and
+        ``theta_subrange`` > 0 searches only a sub-range of that many degrees per sample (App. C);
+        ``heightfield_reparam=False`` holds the split points fixed, which drops the visibility part
+        of the derivative (a diagnostic, like ``spp_boundary=0``).
 
         ``last_stats["summary"]`` lists what was computed and what was skipped."""
         options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, options)

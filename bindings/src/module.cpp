@@ -101,6 +101,9 @@ DiffOptions diff_options(const py::dict& options) {
     else if (k == "octree_max_leaves") o.octree.max_leaves = value.cast<size_t>();
     else if (k == "guide_refresh") o.guide_refresh = value.cast<int>();
     else if (k == "guide_refresh_threshold") o.guide_refresh_threshold = value.cast<float>();
+    else if (k == "heightfield_mipmap") o.heightfield.search.use_mipmap = value.cast<bool>();
+    else if (k == "heightfield_reparam") o.heightfield.reparameterize = value.cast<bool>();
+    else if (k == "theta_subrange") o.heightfield.theta_subrange_degrees = value.cast<float>();
     else throw std::invalid_argument("unknown derivative option '" + k + "'");
   }
   return o;

@@ -151,6 +151,63 @@ ad::V3<ad::Var> replay_camera_path(const Scene& scene, const DiffParams& params,
   return interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters, max_depth);
 }
 
+// The heightfield estimator when the scene holds a heightfield and geometry is differentiable
+// (it then replaces the interior and both boundary terms), else null.
+std::unique_ptr<HeightfieldEstimator> heightfield_estimator(const Scene& scene, const DiffParams& params, const DiffOptions& opt) {
+  if (!params.any_geometry()) return nullptr;
+  for (const Shape& s : scene.shapes)
+    if (s.is_heightfield())
+      return std::make_unique<HeightfieldEstimator>(scene, params, opt.heightfield, effective_max_depth(scene, opt.max_depth));
+  return nullptr;
+}
+
+std::vector<std::string> summarize_heightfield(const Scene& scene, int spp, const DiffOptions& opt, const HeightfieldEstimator& e,
+                                               const HeightfieldCounters& c) {
+  std::vector<std::string> s;
+  const Shape& hf = scene.shapes[e.heightfield_shape()];
+  s.push_back("heightfield estimator (Tong et al. 2023) for '" + hf.id + "' (" + std::to_string(hf.heightfield().nx) + " x " +
+              std::to_string(hf.heightfield().ny) + " heights): " + std::to_string(spp) +
+              " paths per pixel, theta reparameterised at the discontinuities of each azimuth slice; " +
+              std::to_string(c.searches) + " peak searches visited " + std::to_string(c.search.nodes) + " mipmap nodes and " +
+              std::to_string(c.search.cells) + " cells" + (opt.heightfield.search.use_mipmap ? "" : " (brute force: no mipmap skipping)") +
+              (opt.heightfield.theta_subrange_degrees > 0.0f
+                   ? ", theta searched in sub-ranges of " + std::to_string(opt.heightfield.theta_subrange_degrees) + " degrees (App. C)"
+                   : std::string()));
+  s.push_back("primary visibility and indirect boundary terms: not needed (the heightfield estimator reparameterises them)");
+  if (c.delta_light_samples)
+    s.push_back("point/directional lights: " + std::to_string(c.delta_light_samples) +
+                " shadow rays; their shadow edges are not differentiated (use area emitters for shadow derivatives)");
+  if (c.other_shape_hits)
+    s.push_back("warning: " + std::to_string(c.other_shape_hits) +
+                " rays met shapes other than the heightfield and emitters, whose silhouettes are not split: derivatives may be "
+                "biased where those shapes occlude");
+  if (c.empty_ranges) s.push_back(std::to_string(c.empty_ranges) + " samples had an empty theta-range (value 0, counted)");
+  return s;
+}
+
+// One camera sample of pixel (x, y) on a cleared tape: the heightfield estimator's, or the
+// interior term's replay.
+ad::V3<ad::Var> camera_path(const Scene& scene, const DiffParams& params, const HeightfieldEstimator* hfe,
+                            tbb::enumerable_thread_specific<HeightfieldCounters>& hf_counters, int x, int y, Pcg32& rng,
+                            PathInputs& in, PathCounters& counters, int max_depth) {
+  if (!hfe) return replay_camera_path(scene, params, x, y, rng, in, counters, max_depth);
+  ad::Tape::current().clear();
+  in.clear();
+  HeightfieldCounters& c = hf_counters.local();
+  const uint64_t before = c.rays;
+  const ad::V3<ad::Var> L = hfe->pixel(x, y, rng, in, c);
+  counters.rays += c.rays - before;
+  return L;
+}
+
+void finish_heightfield(DiffStats* stats, std::chrono::steady_clock::time_point start, uint64_t paths, const std::atomic<uint64_t>& rays,
+                        const std::atomic<uint64_t>& invalid, const Scene& scene, int spp, const DiffOptions& opt,
+                        const HeightfieldEstimator& e, tbb::enumerable_thread_specific<HeightfieldCounters>& hf_counters) {
+  HeightfieldCounters total;
+  for (const auto& c : hf_counters) total.add(c);
+  fill_stats(stats, start, paths, rays, invalid, summarize_heightfield(scene, spp, opt, e, total));
+}
+
 bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
   for (const auto& [node, slot] : in.nodes)
     if (!std::isfinite(adj[node])) return false;
@@ -322,6 +379,8 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
   const int spp = opt.spp_interior > 0 ? opt.spp_interior : scene.spp;
   Image img{W, H, std::vector<float>(size_t(W) * H * 3, 0.0f)};
   std::atomic<uint64_t> rays{0}, invalid{0};
+  const std::unique_ptr<HeightfieldEstimator> hfe = heightfield_estimator(scene, params, opt);
+  tbb::enumerable_thread_specific<HeightfieldCounters> hf_counters;
 
   for_each_pixel(scene, opt, [&](int x, int y) {
     Pcg32 rng = pixel_rng(opt.seed, uint64_t(y) * W + x);
@@ -331,7 +390,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     double sum[3] = {0, 0, 0};
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters, max_depth);
+      const ad::V3<ad::Var> L = camera_path(scene, params, hfe.get(), hf_counters, x, y, rng, in, counters, max_depth);
       double d[3] = {0, 0, 0};
       bool ok = std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v);
       for (int c = 0; c < 3 && ok; ++c) {
@@ -352,6 +411,11 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     rays += counters.rays;
     invalid += bad;
   });
+  if (hfe) {
+    ad::Tape::current().clear();
+    finish_heightfield(stats, start, uint64_t(W) * H * spp, rays, invalid, scene, spp, opt, *hfe, hf_counters);
+    return img;
+  }
   // Boundary terms splat into per-thread images.
   tbb::enumerable_thread_specific<std::vector<double>> images(std::vector<double>(size_t(W) * H * 3, 0.0));
   const BoundaryTerms terms = run_boundary_terms(scene, params, opt, rays, [&](const PathInputs& in,
@@ -386,6 +450,8 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
   const int spp = opt.spp_interior > 0 ? opt.spp_interior : scene.spp;
   tbb::enumerable_thread_specific<std::vector<double>> grads(std::vector<double>(params.slot_count(), 0.0));
   std::atomic<uint64_t> rays{0}, invalid{0};
+  const std::unique_ptr<HeightfieldEstimator> hfe = heightfield_estimator(scene, params, opt);
+  tbb::enumerable_thread_specific<HeightfieldCounters> hf_counters;
 
   for_each_pixel(scene, opt, [&](int x, int y) {
     Pcg32 rng = pixel_rng(opt.seed, uint64_t(y) * W + x);
@@ -396,7 +462,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     PathCounters counters;
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      const ad::V3<ad::Var> L = replay_camera_path(scene, params, x, y, rng, in, counters, max_depth);
+      const ad::V3<ad::Var> L = camera_path(scene, params, hfe.get(), hf_counters, x, y, rng, in, counters, max_depth);
       if (!(std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v))) {
         ++bad;
         continue;
@@ -414,6 +480,14 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     rays += counters.rays;
     invalid += bad;
   });
+  if (hfe) {
+    ad::Tape::current().clear();
+    std::vector<double> total(params.slot_count(), 0.0);
+    for (const auto& g : grads)
+      for (size_t i = 0; i < total.size(); ++i) total[i] += g[i];
+    finish_heightfield(stats, start, uint64_t(W) * H * spp, rays, invalid, scene, spp, opt, *hfe, hf_counters);
+    return total;
+  }
   auto scatter = [&](const ad::Var& v, double weight, const PathInputs& in) {
     if (weight == 0.0 || v.is_constant()) return;
     std::vector<double> adj;

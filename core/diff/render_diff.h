@@ -2,7 +2,9 @@
 //
 // Terms: the interior term (interior.h) for every parameter kind, the primary-visibility boundary
 // term (primary.h) for meshes and spheres, and the indirect boundary term (indirect.h: Eq. 4's
-// perimeter part for mesh edges and interior part for spheres). Guiding of the indirect term:
+// perimeter part for mesh edges and interior part for spheres). A scene with a heightfield and
+// differentiable geometry uses the heightfield estimator (core/heightfield/estimator.h) instead of
+// all three: its reparameterised sampling covers the visibility changes itself. Guiding of the indirect term:
 // "none", "grid" (baseline or projective) or "octree" (core/guiding/), optionally kept between
 // calls (GuideCache). The summary says what was computed and what was skipped.
 #pragma once
@@ -12,6 +14,7 @@
 #include "core/diff/diff_params.h"
 #include <memory>
 #include "core/guiding/octree.h"
+#include "core/heightfield/estimator.h"
 #include "core/render/render.h"
 
 namespace limn {
@@ -46,6 +49,7 @@ struct DiffOptions {
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
   int guide_refresh = 0;              // rebuild after this many calls (0: every call)
   float guide_refresh_threshold = 0.02f;
+  HeightfieldOptions heightfield;  // scenes with a heightfield and differentiable geometry
   int max_depth = kSceneMaxDepth;  // path integrator: overrides the scene's max_depth for every term
   uint64_t seed = 0;
   int threads = 0;

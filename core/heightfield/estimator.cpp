@@ -1,0 +1,446 @@
+#include "core/heightfield/estimator.h"
+
+#include <array>
+#include "core/diff/replay.h"
+#include "core/render/integrators/path.h"
+
+namespace limn {
+
+using namespace replay;
+
+void HeightfieldCounters::add(const HeightfieldCounters& o) {
+  rays += o.rays;
+  searches += o.searches;
+  search.nodes += o.search.nodes;
+  search.cells += o.search.cells;
+  other_shape_hits += o.other_shape_hits;
+  delta_light_samples += o.delta_light_samples;
+  empty_ranges += o.empty_ranges;
+}
+
+HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options,
+                                           int max_depth)
+    : m_scene(scene), m_params(params), m_opt(options), m_max_depth(max_depth) {
+  const std::string where = scene.source + ": heightfield estimator: ";
+  for (size_t i = 0; i < scene.shapes.size(); ++i) {
+    const Shape& s = scene.shapes[i];
+    if (s.is_heightfield()) {
+      if (m_shape >= 0)
+        throw std::invalid_argument(where + "the scene has more than one heightfield ('" + scene.shapes[m_shape].id + "', '" + s.id +
+                                    "'); one differentiable heightfield per scene is supported");
+      m_shape = int(i);
+    }
+    const Bsdf& b = scene.bsdfs[s.bsdf];
+    if (b.is_delta() || b.transmits())
+      throw std::invalid_argument(where + "shape '" + s.id + "' uses bsdf '" + b.id + "', which is " +
+                                  (b.is_delta() ? "a delta (smooth) BSDF" : "transmissive") +
+                                  "; directions are sampled uniformly in global spherical coordinates (paper App. A.2), so "
+                                  "only rough reflective BSDFs (diffuse, roughconductor) can be used");
+  }
+  if (m_shape < 0) throw std::invalid_argument(where + "the scene has no heightfield");
+  for (int si : params.moving_shapes()) {
+    const Shape& s = scene.shapes[si];
+    if (si != m_shape && !(s.is_mesh() && s.emitter >= 0))
+      throw std::invalid_argument(where + "shape '" + s.id + "' is differentiable; with a heightfield only its heights and "
+                                  "area emitters (meshes) may move, because other shapes' silhouettes are not split");
+  }
+  for (size_t i = 0; i < scene.emitters.size(); ++i) {
+    const Emitter& e = scene.emitters[i];
+    if (const auto* a = std::get_if<AreaEmitter>(&e.model)) {
+      const Shape& s = scene.shapes[a->shape];
+      if (!s.is_mesh())
+        throw std::invalid_argument(where + "emitter '" + e.id + "' is attached to " + s.type + " '" + s.id +
+                                    "'; only mesh area emitters are supported");
+      EmitterTriangles t{int(i), a->shape, {}};
+      for (size_t f = 0; f < s.mesh().triangle_count(); ++f) t.prims.push_back(int(f));
+      m_area_emitters.push_back(std::move(t));
+    } else if (std::holds_alternative<PointEmitter>(e.model) || std::holds_alternative<DirectionalEmitter>(e.model)) {
+      m_delta_emitters.push_back(int(i));
+    }
+  }
+}
+
+namespace {
+
+constexpr double kPiD = 3.14159265358979323846;
+
+// A theta at which the slice is split: its primal value and its taped value.
+struct Split {
+  double v;
+  Var var;
+};
+
+// Slope of the direction with zenith angle theta (k = cot theta), clamped away from infinity.
+double slope_of(double theta) {
+  const double s = std::sin(theta), c = std::cos(theta);
+  if (s < 1e-15) return c > 0.0 ? 1e30 : -1e30;
+  return c / s;
+}
+
+// The origin of a slice, in the heightfield's local frame.
+struct Origin {
+  VV p;          // taped
+  Vec3d p0;      // primal
+};
+
+}  // namespace
+
+struct HeightfieldPath {
+  const HeightfieldEstimator& E;
+  const Scene& scene;
+  PathInputs& in;
+  HeightfieldCounters& cnt;
+  Pcg32& rng;
+  DiffHeightfieldFrame F;
+  Replay R;
+
+  HeightfieldPath(const HeightfieldEstimator& e, PathInputs& inputs, HeightfieldCounters& counters, Pcg32& r)
+      : E(e), scene(e.m_scene), in(inputs), cnt(counters), rng(r), F(e.m_scene, e.m_params, inputs, e.m_shape),
+        R{e.m_scene, e.m_params, inputs} {}
+
+  const Heightfield& hf() const { return F.hf; }
+
+  Origin origin(const VV& p_world) const {
+    Origin o;
+    o.p = F.to_local_point(p_world);
+    o.p0 = Vec3d(o.p.x.v, o.p.y.v, o.p.z.v);
+    return o;
+  }
+
+  VV world_direction(const Var& phi, const Var& theta) const {
+    const Var st = sin(theta);
+    return F.to_world_vector(VV(st * cos(phi), st * sin(phi), cos(theta))) / F.scale;
+  }
+
+  // Emitter triangles in the local frame (taped vertices).
+  void emitter_triangles(const HeightfieldEstimator::EmitterTriangles& et, std::vector<std::array<VV, 3>>& out) const {
+    const Mesh& m = scene.shapes[et.shape].mesh();
+    out.clear();
+    for (int f : et.prims) {
+      std::array<VV, 3> t;
+      for (int c = 0; c < 3; ++c) t[c] = F.to_local_point(diff_vertex(scene, E.m_params, in, et.shape, m.indices[3 * f + c]));
+      out.push_back(t);
+    }
+  }
+
+  // Thetas where the half-plane at azimuth phi from o crosses the edges of the triangles.
+  static void crossings(const Origin& o, const Var& phi, const std::vector<std::array<VV, 3>>& tris, std::vector<Split>& out) {
+    const Var c = cos(phi), s = sin(phi);
+    for (const auto& t : tris)
+      for (int e = 0; e < 3; ++e) {
+        const VV& a = t[e];
+        const VV& b = t[(e + 1) % 3];
+        const Var sa = -s * (a.x - o.p.x) + c * (a.y - o.p.y), sb = -s * (b.x - o.p.x) + c * (b.y - o.p.y);
+        if ((sa.v > 0.0) == (sb.v > 0.0)) continue;
+        const Var f = sa / (sa - sb);
+        const VV p = a + (b - a) * f;
+        const Var r = c * (p.x - o.p.x) + s * (p.y - o.p.y);
+        if (!(r.v > 0.0)) continue;  // the other half of the plane
+        const Var th = atan2(r, p.z - o.p.z);
+        out.push_back({th.v, th});
+      }
+  }
+
+  // Whether the vertical line through o meets triangle t, and at which height.
+  static bool vertical_hit(const Origin& o, const std::array<VV, 3>& t, double& z) {
+    const Vec3d a(t[0].x.v, t[0].y.v, t[0].z.v), b(t[1].x.v, t[1].y.v, t[1].z.v), c(t[2].x.v, t[2].y.v, t[2].z.v);
+    const double d = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+    if (std::abs(d) < 1e-300) return false;
+    const double u = ((o.p0.x - a.x) * (c.y - a.y) - (c.x - a.x) * (o.p0.y - a.y)) / d;
+    const double v = ((b.x - a.x) * (o.p0.y - a.y) - (o.p0.x - a.x) * (b.y - a.y)) / d;
+    if (u < 0.0 || v < 0.0 || u + v > 1.0) return false;
+    z = a.z + u * (b.z - a.z) + v * (c.z - a.z);
+    return true;
+  }
+
+  // Samples theta in [lo, hi] for the slice at azimuth phi (Eq. 10-11): split at the peaks (and at
+  // every emitter edge), choose the interval holding a uniform primal theta and map linearly
+  // between its taped end points. weight = 1 / pdf(theta) with the end points' motion in it.
+  bool sample_theta(const Origin& o, const Var& phi, Var lo, Var hi, Var& theta, Var& weight) {
+    const double lo0 = lo.v, hi0 = hi.v;
+    if (!(hi0 > lo0)) return false;
+    const double u = double(rng.next_float());
+    const double th0 = lo0 + u * (hi0 - lo0);
+    if (E.m_opt.theta_subrange_degrees > 0.0f) {  // App. C: search one sub-range only
+      const int n = std::max(1, int(std::ceil((hi0 - lo0) / (E.m_opt.theta_subrange_degrees * kPiD / 180.0))));
+      const int k = std::min(n - 1, int(u * n));
+      const Var a = lo + (hi - lo) * Var(double(k) / n), b = lo + (hi - lo) * Var(double(k + 1) / n);
+      lo = a;
+      hi = b;
+    }
+    std::vector<Split> splits{{lo.v, lo}, {hi.v, hi}};
+    // Peaks with theta in (lo, hi): slopes in (cot hi, cot lo).
+    const glm::dvec2 d(std::cos(phi.v), std::sin(phi.v));
+    ++cnt.searches;
+    const std::vector<SlicePeak> peaks = find_peaks(hf(), o.p0, d, slope_of(hi.v), slope_of(lo.v), E.m_opt.search, &cnt.search);
+    const Var dx = cos(phi), dy = sin(phi);
+    for (const SlicePeak& p : peaks) {
+      // The peak at fixed horizontal distance: k is stationary in t there (Eq. 12), so its
+      // derivative is the partial at fixed t. Border points are fixed in t by the footprint.
+      Var z, zx, zy;
+      F.height(in, o.p.x + dx * Var(p.t), o.p.y + dy * Var(p.t), z, zx, zy);
+      const Var th = atan2(Var(p.t), z - o.p.z);
+      splits.push_back({th.v, th});
+    }
+    std::vector<std::array<VV, 3>> tris;
+    std::vector<Split> cross;
+    for (const auto& et : E.m_area_emitters) {
+      emitter_triangles(et, tris);
+      crossings(o, phi, tris, cross);
+    }
+    for (const Split& s : cross) splits.push_back(s);
+    // Keep the splits inside (lo, hi), sorted by primal value.
+    std::vector<Split> cut{splits[0]};
+    std::sort(splits.begin() + 2, splits.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
+    for (size_t i = 2; i < splits.size(); ++i)
+      if (splits[i].v > lo.v && splits[i].v < hi.v) cut.push_back(splits[i]);
+    cut.push_back(splits[1]);
+    if (!E.m_opt.reparameterize)
+      for (Split& c : cut) c.var = Var(c.v);
+    size_t j = 0;
+    while (j + 2 < cut.size() && th0 >= cut[j + 1].v) ++j;
+    const double w0 = cut[j + 1].v - cut[j].v;
+    if (!(w0 > 0.0)) return false;
+    const Var width = cut[j + 1].var - cut[j].var;
+    theta = cut[j].var + width * Var((th0 - cut[j].v) / w0);
+    weight = Var(hi0 - lo0) * width / Var(w0);
+    return true;
+  }
+
+  // Continuation range of a surface vertex: above the tangent plane for the heightfield (below it
+  // a reflective BSDF is zero and the surface hides everything), the whole sphere elsewhere.
+  Var horizon(const DiffVertex& x, const SurfaceInteraction& si, const Var& phi) const {
+    if (si.shape != E.m_shape) return Var(kPiD);
+    const VV n = F.to_local_vector(x.ng);  // (-zx, -zy, 1) / norm, scaled by 1 / scale
+    const Var k0 = -(n.x * cos(phi) + n.y * sin(phi)) / n.z;
+    return atan2(Var(1.0), k0);
+  }
+
+  void note_hit(const SurfaceInteraction& si) {
+    const Shape& s = scene.shapes[si.shape];
+    if (si.shape != E.m_shape && s.emitter < 0) ++cnt.other_shape_hits;
+  }
+
+  // Area emitters through emitter-domain sampling (App. A.1).
+  VV area_emitter_sample(const DiffVertex& x, const SurfaceInteraction& si, const VV& wi, int bsdf) {
+    const size_t K = E.m_area_emitters.size();
+    const size_t k = std::min(K - 1, size_t(rng.next_float() * K));
+    const float u_phi = rng.next_float();
+    const auto& et = E.m_area_emitters[k];
+    const Origin o = origin(x.p);
+    std::vector<std::array<VV, 3>> tris;
+    emitter_triangles(et, tris);
+    // Azimuth range: the angular hull of the vertices, or everything when the emitter is right
+    // above or below the origin (or wraps around it).
+    bool full = false;
+    for (const auto& t : tris) {
+      double z;
+      full |= vertical_hit(o, t, z);
+    }
+    Var phi_lo(0.0), phi_hi(2.0 * kPiD);
+    if (!full) {
+      const double ref = std::atan2(tris[0][0].y.v - o.p0.y, tris[0][0].x.v - o.p0.x);
+      double mn = 1e30, mx = -1e30;
+      for (const auto& t : tris)
+        for (const VV& v : t) {
+          const Var az = atan2(v.y - o.p.y, v.x - o.p.x);
+          double off = az.v - ref;
+          while (off > kPiD) off -= 2.0 * kPiD;
+          while (off <= -kPiD) off += 2.0 * kPiD;
+          const Var shifted = az + Var(ref + off - az.v);  // the same angle, unwrapped next to ref
+          if (off < mn) { mn = off; phi_lo = shifted; }
+          if (off > mx) { mx = off; phi_hi = shifted; }
+        }
+      if (mx - mn >= kPiD) { phi_lo = Var(0.0); phi_hi = Var(2.0 * kPiD); }
+    }
+    const Var phi = phi_lo + (phi_hi - phi_lo) * Var(double(u_phi));
+    const Var w_phi = phi_hi - phi_lo;
+    // Theta range: where the slice meets the emitter.
+    std::vector<Split> ends;
+    crossings(o, phi, tris, ends);
+    for (const auto& t : tris) {
+      double z;
+      if (vertical_hit(o, t, z)) ends.push_back(z > o.p0.z ? Split{0.0, Var(0.0)} : Split{kPiD, Var(kPiD)});
+    }
+    if (ends.size() < 2) {
+      ++cnt.empty_ranges;
+      return VV();
+    }
+    Split lo = ends[0], hi = ends[0];
+    for (const Split& s : ends) {
+      if (s.v < lo.v) lo = s;
+      if (s.v > hi.v) hi = s;
+    }
+    const Var h = horizon(x, si, phi);
+    if (lo.v >= h.v) return VV();  // the emitter is below the tangent plane here
+    if (hi.v > h.v) hi = Split{h.v, h};  // nothing is reflected below it (and the integrand is 0 there)
+    Var theta, w_theta;
+    if (!sample_theta(o, phi, lo.var, hi.var, theta, w_theta)) {
+      ++cnt.empty_ranges;
+      return VV();
+    }
+    const VV w = world_direction(phi, theta);
+    const Vec3 w0(float(w.x.v), float(w.y.v), float(w.z.v));
+    SurfaceInteraction e;
+    ++cnt.rays;
+    if (!scene.intersect(spawn_ray(si, w0), e)) return VV();
+    if (e.shape != et.shape) {
+      note_hit(e);
+      return VV();
+    }
+    if (!(glm::dot(e.ng, w0) < 0.0f)) return VV();  // the back of the emitter
+    const Spectrum& rad = std::get<AreaEmitter>(scene.emitters[et.emitter].model).radiance;
+    return R.bsdf_eval(bsdf, x, wi, w) * R.emitter_value(et.emitter, rad) * (sin(theta) * w_phi * w_theta * Var(double(K)));
+  }
+
+  // Point and directional lights by a shadow ray (their shadow edges are not differentiated).
+  VV delta_light_samples(const DiffVertex& x, const SurfaceInteraction& si, const VV& wi, int bsdf) {
+    VV L;
+    for (int idx : E.m_delta_emitters) {
+      const Emitter& e = scene.emitters[idx];
+      ++cnt.delta_light_samples;
+      ++cnt.rays;
+      if (const auto* pt = std::get_if<PointEmitter>(&e.model)) {
+        if (scene.occluded(spawn_ray_to(si, pt->position))) continue;
+        const VV dvec = constant(pt->position) - x.p;
+        const Var d2 = dot(dvec, dvec);
+        L = L + R.bsdf_eval(bsdf, x, wi, dvec / sqrt(d2)) * R.emitter_value(idx, pt->intensity) / d2;
+      } else if (const auto* dir = std::get_if<DirectionalEmitter>(&e.model)) {
+        if (scene.occluded(spawn_ray(si, -dir->direction))) continue;
+        L = L + R.bsdf_eval(bsdf, x, wi, constant(-dir->direction)) * R.emitter_value(idx, dir->irradiance);
+      }
+    }
+    return L;
+  }
+
+  VV escaped(const Vec3& d) const {
+    VV L;
+    for (int idx : scene.infinite_emitters) {
+      const Emitter& e = scene.emitters[idx];
+      VV Le = constant(eval_infinite(e, d));
+      if (const auto* c = std::get_if<ConstantEmitter>(&e.model)) Le = R.emitter_value(idx, c->radiance);
+      L = L + Le;
+    }
+    return L;
+  }
+
+  // The path from a surface vertex on: NEE strategies and uniform continuation.
+  VV continue_path(DiffVertex x, SurfaceInteraction si, VV wi, VV beta, int depth) {
+    VV L;
+    const IntegratorSettings& cfg = scene.integrator;
+    for (;; ++depth) {
+      if (E.m_max_depth >= 0 && depth + 2 > E.m_max_depth) break;
+      const int bsdf = scene.shapes[si.shape].bsdf;
+      if (!E.m_area_emitters.empty()) L = L + beta * area_emitter_sample(x, si, wi, bsdf);
+      if (!E.m_delta_emitters.empty()) L = L + beta * delta_light_samples(x, si, wi, bsdf);
+      // Continuation: uniform azimuth, theta over [0, horizon].
+      const Var phi(2.0 * kPiD * double(rng.next_float()));
+      Var theta, w_theta;
+      if (!sample_theta(origin(x.p), phi, Var(0.0), horizon(x, si, phi), theta, w_theta)) break;
+      const VV w = world_direction(phi, theta);
+      const Vec3 w0(float(w.x.v), float(w.y.v), float(w.z.v));
+      const VV f = R.bsdf_eval(bsdf, x, wi, w);
+      if (f.x.v == 0.0 && f.y.v == 0.0 && f.z.v == 0.0) break;
+      beta = beta * f * (sin(theta) * Var(2.0 * kPiD) * w_theta);
+      const Ray ray = spawn_ray(si, w0);
+      SurfaceInteraction next;
+      ++cnt.rays;
+      if (!scene.intersect(ray, next)) {
+        L = L + beta * escaped(w0);
+        break;
+      }
+      note_hit(next);
+      x = R.ray_hit(x.p, w, next, ray);  // area emission is counted by emitter sampling only
+      wi = -w;
+      si = next;
+      if (depth + 1 >= cfg.rr_depth) {
+        const Spectrum bp(float(beta.x.v), float(beta.y.v), float(beta.z.v));
+        const float q = russian_roulette(bp, 1.0f, rng);
+        if (q == 0.0f) break;
+        beta = beta / Var(double(q));
+      }
+    }
+    return L;
+  }
+
+  // Pixel (px, py) with a box filter: the pixel's cone turned into (phi, theta-range) (App. A.1).
+  VV pixel(int px, int py) {
+    const Camera& cam = scene.camera;
+    const Vec3 eye = cam.world_from_camera.point(Vec3(0.0f));
+    const Origin o = origin(constant(eye));
+    const Mat4d& to_local = hf().world_from_local.inverse_matrix();
+    auto local_dir = [&](const Vec2& film) {
+      return glm::normalize(glm::dmat3(to_local) * Vec3d(cam.generate_ray(film).d));
+    };
+    const Vec3d c[4] = {local_dir(Vec2(px, py)), local_dir(Vec2(px + 1, py)), local_dir(Vec2(px + 1, py + 1)), local_dir(Vec2(px, py + 1))};
+    const Vec3d centre = local_dir(Vec2(px + 0.5f, py + 0.5f));
+    Vec3d n[4];
+    for (int k = 0; k < 4; ++k) {
+      n[k] = glm::cross(c[k], c[(k + 1) % 4]);
+      if (glm::dot(n[k], centre) < 0.0) n[k] = -n[k];
+    }
+    // Azimuth range of the cone: everything when it holds the vertical, else the corners' hull.
+    auto contains = [&](const Vec3d& v) {
+      for (const Vec3d& nk : n)
+        if (glm::dot(nk, v) < 0.0) return false;
+      return true;
+    };
+    double phi_lo = 0.0, phi_hi = 2.0 * kPiD;
+    if (!contains(Vec3d(0, 0, 1)) && !contains(Vec3d(0, 0, -1))) {
+      const double ref = std::atan2(centre.y, centre.x);
+      double mn = 1e30, mx = -1e30;
+      for (const Vec3d& ck : c) {
+        double off = std::atan2(ck.y, ck.x) - ref;
+        while (off > kPiD) off -= 2.0 * kPiD;
+        while (off <= -kPiD) off += 2.0 * kPiD;
+        mn = std::min(mn, off);
+        mx = std::max(mx, off);
+      }
+      phi_lo = ref + mn;
+      phi_hi = ref + mx;
+    }
+    const double phi0 = phi_lo + (phi_hi - phi_lo) * double(rng.next_float());
+    // Theta range: the half-plane at phi inside all four sides, A sin(theta) + B cos(theta) >= 0.
+    double t_lo = 0.0, t_hi = kPiD;
+    for (const Vec3d& nk : n) {
+      const double A = nk.x * std::cos(phi0) + nk.y * std::sin(phi0), B = nk.z, beta = std::atan2(B, A);
+      if (beta >= 0.0) t_hi = std::min(t_hi, kPiD - beta);
+      else t_lo = std::max(t_lo, -beta);
+    }
+    Var theta, w_theta;
+    const Var phi(phi0);
+    if (!(t_hi > t_lo) || !sample_theta(o, phi, Var(t_lo), Var(t_hi), theta, w_theta)) {
+      ++cnt.empty_ranges;
+      return VV();
+    }
+    const VV w = world_direction(phi, theta);
+    const Vec3 w0(float(w.x.v), float(w.y.v), float(w.z.v));
+    // Film area per solid angle, K_x K_y / cos^3 (angle to the optical axis).
+    const Vec3 fwd = glm::normalize(cam.world_from_camera.vector(Vec3(0, 0, 1)));
+    const Var cos_a = dot(w, constant(fwd));
+    if (!(cos_a.v > 0.0)) return VV();
+    const double Kx = 0.5 * cam.width / cam.tan_half_x, Ky = 0.5 * cam.height / cam.tan_half_y;
+    VV beta = VV(Var(1.0), Var(1.0), Var(1.0)) *
+              (Var(Kx * Ky) / (cos_a * cos_a * cos_a) * sin(theta) * Var(phi_hi - phi_lo) * w_theta);
+    const Ray ray{eye, w0, cam.near_clip / float(cos_a.v), cam.far_clip / float(cos_a.v)};
+    SurfaceInteraction si;
+    ++cnt.rays;
+    const IntegratorSettings& cfg = scene.integrator;
+    if (!scene.intersect(ray, si)) return cfg.hide_emitters ? VV() : beta * escaped(w0);
+    note_hit(si);
+    const DiffVertex x = R.ray_hit(constant(eye), w, si, ray);
+    VV L;
+    const Shape& shape = scene.shapes[si.shape];
+    if (shape.emitter >= 0 && glm::dot(si.ng, w0) < 0.0f && !cfg.hide_emitters && E.m_max_depth != 0)
+      L = beta * R.emitter_value(shape.emitter, std::get<AreaEmitter>(scene.emitters[shape.emitter].model).radiance);
+    if (E.m_max_depth == 0) return VV();
+    return L + continue_path(x, si, -w, beta, 0);
+  }
+};
+
+ad::V3<ad::Var> HeightfieldEstimator::pixel(int x, int y, Pcg32& rng, PathInputs& in, HeightfieldCounters& counters) const {
+  HeightfieldPath path(*this, in, counters, rng);
+  return path.pixel(x, y);
+}
+
+}  // namespace limn
