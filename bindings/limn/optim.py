@@ -41,8 +41,18 @@ class Adam:
         self.x -= (self.lr * m_hat / (np.sqrt(v_hat) + self.eps)).astype(self.x.dtype)
 
 
+def grid_faces(rows: int, columns: int) -> np.ndarray:
+    """Triangles (F x 3) of a rows x columns grid of points indexed row-major: the connectivity a
+    heightfield's Laplacian is taken over (Large Steps on heights)."""
+    r, c = np.meshgrid(np.arange(rows - 1), np.arange(columns - 1), indexing="ij")
+    a = (r * columns + c).ravel()
+    b, d, e = a + 1, a + columns, a + columns + 1
+    return np.concatenate([np.stack([a, b, e], 1), np.stack([a, e, d], 1)]).astype(np.int64)
+
+
 class LargeSteps:
-    """u = (I + lambda L) x and back, for a mesh's vertices x (N x 3) and faces (F x 3)."""
+    """u = (I + lambda L) x and back, for N points x (N x k: vertex positions k = 3, heights k = 1)
+    connected by faces (F x 3)."""
 
     def __init__(self, faces, vertex_count: int, lambda_: float):
         self._native = _core.LargeSteps(np.asarray(faces, dtype=np.int64), int(vertex_count), float(lambda_))
@@ -84,7 +94,9 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
     (scene, target image) pairs) to match the targets. ``faces`` (F x 3) enables Large Steps with
     ``lambda_`` (0 disables it); ``mask`` (N,) of 0/1 holds vertices with 0 fixed.
     ``callback(iteration, loss, vertices)`` may return False to stop (the last good state stays).
-    ``options`` go to every ``render_backward`` call (e.g. ``guiding``, ``grid_resolution``)."""
+    ``options`` go to every ``render_backward`` call (e.g. ``guiding``, ``grid_resolution``).
+    A heightfield's ``"<id>.heights"`` (rows x columns) works the same way: ``faces`` from
+    :func:`grid_faces`, ``mask`` of shape (rows * columns,) or (rows, columns)."""
     if not views:
         raise ValueError("fit: no views")
     scenes = [s for s, _ in views]
@@ -92,7 +104,9 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
         if target.shape != (s.height, s.width, 3):
             raise ValueError(f"fit: target shape {target.shape} != film {(s.height, s.width, 3)}")
         s.set_differentiable([name])
-    x = scenes[0].params[name].astype(np.float64)
+    shape = scenes[0].params[name].shape
+    # Points as rows: vertex positions (N, 3) as they are, heights (rows, columns) as (N, 1).
+    x = scenes[0].params[name].astype(np.float64).reshape(shape if len(shape) == 2 and shape[1] == 3 else (-1, 1))
     keep = None if mask is None else np.asarray(mask, dtype=np.float64).reshape(-1, 1)
     precond = LargeSteps(faces, len(x), lambda_) if faces is not None and lambda_ > 0 else None
     u = precond.to_u(x) if precond else x.copy()
@@ -108,12 +122,12 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
             total += value
             g = s.render_backward(adjoint, spp=spp, spp_primary=spp_primary, spp_boundary=spp_boundary,
                                   seed=seed + 104729 * it + k, **(options or {}))
-            grad += g[name]
+            grad += g[name].reshape(x.shape)
         if keep is not None:
             grad *= keep
         result.losses.append(total / len(views))
         result.seconds.append(time.perf_counter() - t0)
-        if callback is not None and callback(it, result.losses[-1], x) is False:
+        if callback is not None and callback(it, result.losses[-1], x.reshape(shape)) is False:
             result.cancelled = True
             break
         opt.step(precond.gradient_u(grad) if precond else grad)
@@ -122,5 +136,5 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
             x_new = np.where(keep > 0, x_new, x)
         x = x_new
         for s in scenes:
-            s.params[name] = x.astype(np.float32)
+            s.params[name] = x.reshape(shape).astype(np.float32)
     return result

@@ -289,8 +289,8 @@ PYBIND11_MODULE(_core, m) {
 
   using Rows = py::array_t<double, py::array::c_style | py::array::forcecast>;
   auto check_rows = [](const LargeSteps& ls, const Rows& a, const char* what) {
-    if (a.ndim() != 2 || a.shape(1) != 3 || size_t(a.shape(0)) != ls.vertex_count())
-      throw std::invalid_argument(std::string("LargeSteps: ") + what + " must have shape (" + std::to_string(ls.vertex_count()) + ", 3)");
+    if (a.ndim() != 2 || a.shape(1) < 1 || size_t(a.shape(0)) != ls.vertex_count())
+      throw std::invalid_argument(std::string("LargeSteps: ") + what + " must have shape (" + std::to_string(ls.vertex_count()) + ", k)");
   };
   py::class_<LargeSteps>(m, "LargeSteps")
       .def(py::init([](py::array_t<int64_t, py::array::c_style | py::array::forcecast> faces, size_t n, double lambda) {
@@ -304,16 +304,16 @@ PYBIND11_MODULE(_core, m) {
            }), py::arg("faces"), py::arg("vertex_count"), py::arg("lambda_"))
       .def("to_u", [check_rows](const LargeSteps& ls, const Rows& x) {
         check_rows(ls, x, "x");
-        Rows u({py::ssize_t(ls.vertex_count()), py::ssize_t(3)});
-        ls.to_u(x.data(), u.mutable_data());
+        Rows u({py::ssize_t(ls.vertex_count()), x.shape(1)});
+        ls.to_u(x.data(), u.mutable_data(), int(x.shape(1)));
         return u;
       })
       .def("from_u", [check_rows](const LargeSteps& ls, const Rows& u) {
         check_rows(ls, u, "u");
-        Rows x({py::ssize_t(ls.vertex_count()), py::ssize_t(3)});
+        Rows x({py::ssize_t(ls.vertex_count()), u.shape(1)});
         {
           py::gil_scoped_release release;
-          ls.from_u(u.data(), x.mutable_data());
+          ls.from_u(u.data(), x.mutable_data(), int(u.shape(1)));
         }
         return x;
       });

@@ -10,10 +10,6 @@ struct Node {
   double t0, t1;
 };
 
-struct Sample {
-  double t, k;
-};
-
 }  // namespace
 
 std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_start, double k_stop,
@@ -33,33 +29,36 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     if (k > k_run && k < k_stop) peaks.push_back({t_in, k, true});
     k_run = std::max(k_run, k);
   }
-  // Slope samples along the slice, kept across adjacent cells to see maxima on cell borders;
-  // a skipped node breaks the run (everything in it is under the running maximum).
-  Sample prev2{0, -1e300}, prev1{0, -1e300};
-  int run = 0;
-  bool last_is_record = false;
-  double last_t = -1.0;
-  auto refine = [&](double a, double b) {  // golden-section maximum of k on [a, b]
-    constexpr double g = 0.6180339887498949;
-    double x1 = b - g * (b - a), x2 = a + g * (b - a), f1 = k_at(x1), f2 = k_at(x2);
-    for (int it = 0; it < 40; ++it) {  // 0.618^40 ~ 4e-9 of the bracket
-      if (f1 < f2) { a = x1; x1 = x2; f1 = f2; x2 = a + g * (b - a); f2 = k_at(x2); }
-      else { b = x2; x2 = x1; f2 = f1; x1 = b - g * (b - a); f1 = k_at(x1); }
-    }
-    return f1 > f2 ? Sample{x1, f1} : Sample{x2, f2};
+  // Slope samples along the slice with the sign of dk/dt = (z'(t) - k) / t: a maximum lies between
+  // consecutive samples where it turns from rising to falling, also right after a skipped node
+  // (everything inside that node is under the running maximum, so no record is lost there).
+  struct Sample {
+    double t, k, dk;
   };
+  auto sample_at = [&](double t) {
+    const HeightSample h = hf.eval(o.x + t * d.x, o.y + t * d.y);
+    const double k = (h.z - o.z) / t;
+    return Sample{t, k, (h.dx * d.x + h.dy * d.y) - k};
+  };
+  Sample prev{0, -1e300, 0};
+  bool have_prev = false, last_is_record = false;
+  double last_t = -1.0;
   auto add_sample = [&](const Sample& s) {
-    if (run >= 2 && prev1.k >= prev2.k && prev1.k > s.k) {  // a sampled local maximum at prev1
-      const Sample m = refine(prev2.t, s.t);
+    if (have_prev && prev.dk > 0.0 && s.dk <= 0.0) {
+      double lo = prev.t, hi = s.t;  // bisection on the sign of dk/dt
+      for (int it = 0; it < 50; ++it) {  // 2^-50 of a sub-step
+        const double mid = 0.5 * (lo + hi);
+        (sample_at(mid).dk > 0.0 ? lo : hi) = mid;
+      }
+      const Sample m = sample_at(0.5 * (lo + hi));
       if (m.k > k_run && m.k < k_stop) peaks.push_back({m.t, m.k, false});
       k_run = std::max(k_run, m.k);
     }
     last_is_record = s.k > k_run;
     last_t = s.t;
     k_run = std::max(k_run, s.k);
-    prev2 = prev1;
-    prev1 = s;
-    ++run;
+    prev = s;
+    have_prev = true;
   };
 
   const double z_max = hf.max_height();
@@ -78,7 +77,7 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     if (k_run >= 0.0 && o.z + k_run * n.t0 > z_max + eps) break;  // the line is above everything that follows
     const Heightfield::Level& L = hf.mip[n.level];
     if (opt.use_mipmap && L.hi[size_t(n.j) * L.w + n.i] <= line_min - eps) {
-      run = 0;
+      have_prev = false;
       last_is_record = false;
       continue;
     }
@@ -99,16 +98,16 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     ++st.cells;
     // Sub-steps of this cell; the cell's first point is the previous cell's last unless the run
     // was broken, and t = 0 itself (the origin) is never a sample.
-    const bool continues = run > 0 && std::abs(prev1.t - n.t0) <= 1e-12 * std::max(1.0, n.t0);
+    const bool continues = have_prev && std::abs(prev.t - n.t0) <= 1e-12 * std::max(1.0, n.t0);
     for (int s = continues ? 1 : 0; s <= n_sub; ++s) {
       const double t = n.t0 + (n.t1 - n.t0) * s / n_sub;
       if (t <= 1e-9 * (hf.width + hf.depth)) continue;
-      add_sample({t, k_at(t)});
+      add_sample(sample_at(t));
     }
   }
   // The far edge is a silhouette when the slope still rises there.
   if (k_run < k_stop && last_is_record && std::abs(last_t - t_out) <= 1e-9 * std::max(1.0, t_out))
-    peaks.push_back({t_out, prev1.k, true});
+    peaks.push_back({t_out, prev.k, true});
   return peaks;
 }
 

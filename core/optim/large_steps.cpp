@@ -47,18 +47,20 @@ LargeSteps::LargeSteps(LargeSteps&&) noexcept = default;
 LargeSteps& LargeSteps::operator=(LargeSteps&&) noexcept = default;
 size_t LargeSteps::vertex_count() const { return m->n; }
 
-void LargeSteps::to_u(const double* x, double* u) const {
+void LargeSteps::to_u(const double* x, double* u, int columns) const {
   const long n = long(m->n);
-  Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> X(x, n, 3);
-  Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> U(u, n, 3);
+  using Rows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  Eigen::Map<const Rows> X(x, n, columns);
+  Eigen::Map<Rows> U(u, n, columns);
   U = m->M * X;
 }
 
-void LargeSteps::from_u(const double* u, double* x) const {
+void LargeSteps::from_u(const double* u, double* x, int columns) const {
   const long n = long(m->n);
-  Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> U(u, n, 3);
-  Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> X(x, n, 3);
-  const Eigen::Matrix<double, Eigen::Dynamic, 3> Ucol = U;
+  using Rows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  Eigen::Map<const Rows> U(u, n, columns);
+  Eigen::Map<Rows> X(x, n, columns);
+  const Eigen::MatrixXd Ucol = U;
   X = m->llt.solve(Ucol);
 }
 

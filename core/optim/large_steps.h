@@ -1,6 +1,6 @@
 // The Large-Steps preconditioner (Nicolet, Jacobson, Jakob 2021, "Large Steps in Inverse
 // Rendering of Geometry"): vertices x are optimised through u = (I + lambda L) x, where L is the
-// combinatorial (uniform) Laplacian of the mesh; x = M^-1 u is recovered with a sparse Cholesky
+// combinatorial (uniform) Laplacian of the mesh (of the grid's triangulation for heightfields); x = M^-1 u is recovered with a sparse Cholesky
 // factorisation of the symmetric positive definite M = I + lambda L (Eigen's SimplicialLLT),
 // factorised once per mesh topology.
 #pragma once
@@ -18,10 +18,10 @@ class LargeSteps {
   LargeSteps& operator=(LargeSteps&&) noexcept;
 
   size_t vertex_count() const;
-  // u = M x for row-major N x 3 arrays.
-  void to_u(const double* x, double* u) const;
+  // u = M x for row-major N x `columns` arrays (3 for vertex positions, 1 for heights).
+  void to_u(const double* x, double* u, int columns = 3) const;
   // x = M^-1 u.
-  void from_u(const double* u, double* x) const;
+  void from_u(const double* u, double* x, int columns = 3) const;
 
  private:
   struct Impl;

@@ -1,0 +1,253 @@
+"""Heightfields (Tong et al. 2023): the shape and its parameters, the heightfield estimator against
+cached-protocol finite differences (cone of Figure 7 growing and lit by a moving light, a terrain
+under global illumination, the worst case of Figure A2), what the reparameterisation adds, the
+mipmap against the brute-force search, the theta sub-ranges of App. C, and stiff cases."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+import limn
+from conftest import SCENES
+from test_derivatives import block_z
+
+HERE = os.path.join(SCENES, "heightfield")
+
+
+def scene_dict(name):
+    with open(os.path.join(HERE, name + ".json")) as f:
+        return json.load(f)
+
+
+def load(d):
+    return limn.load_dict(d, base_dir=HERE)
+
+
+def quiet(fn, *args, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*args, **kw)
+
+
+def heights_of(d):
+    return np.asarray(d["terrain"]["data"], np.float32)
+
+
+def compare(scene, tangents, seeds=8, spp=64, fd_spp=1024, eps=2e-2, **options):
+    """Block z-scores against FD with the reparameterisation on and off."""
+    fd = np.stack([limn.fd(scene, tangents, eps=eps, spp=fd_spp, seed=k, cache=False) for k in range(seeds)])
+    on = np.stack([quiet(scene.render_forward, tangents, spp=spp, seed=50 + k, **options) for k in range(seeds)])
+    off = np.stack([quiet(scene.render_forward, tangents, spp=spp, seed=50 + k, heightfield_reparam=False, **options)
+                    for k in range(seeds)])
+    return block_z(on, fd), block_z(off, fd), on, fd
+
+
+def test_cone_growing_agrees_with_fd_and_needs_the_reparameterisation():
+    """Figure 7, geometry: the cone grows along z; its shadow edge and its silhouette against the
+    ground move. Without the moving split points (the reparameterisation) the estimate is far off."""
+    d = scene_dict("cone")
+    scene = load(d)
+    name = "terrain.heights"
+    scene.set_differentiable([name])
+    z_on, z_off, on, fd = compare(scene, {name: heights_of(d)})
+    print(f"cone growth: |z| on {np.abs(z_on).max():.2f}, off {np.abs(z_off).max():.2f}")
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > 8.0, z_off
+    summary = scene.last_stats["summary"]
+    assert any(line.startswith("heightfield estimator (Tong et al. 2023) for 'terrain' (33 x 33 heights)") for line in summary)
+    assert any("not needed" in line for line in summary)
+
+
+def test_moving_light_agrees_with_fd():
+    """Figure 7, light: the area light moves up; the shadow edges move with it (through the emitter
+    edges, which are split points) and the lit side changes smoothly."""
+    d = scene_dict("cone")
+    scene = load(d)
+    name = "light.to_world.translation"
+    scene.set_differentiable([name])
+    z_on, z_off, on, fd = compare(scene, {name: np.float32([0, 0, 1])})
+    print(f"moving light: |z| on {np.abs(z_on).max():.2f}, off {np.abs(z_off).max():.2f}")
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > 8.0, z_off
+
+
+def test_terrain_under_global_illumination_agrees_with_fd():
+    """A terrain (Figure 8's kind) under a sky and an area light, two bounces; the heights change
+    by a smooth bump, which moves shadows, self-occlusion and silhouettes."""
+    d = scene_dict("terrain")
+    scene = load(d)
+    name = "terrain.heights"
+    scene.set_differentiable([name])
+    n = heights_of(d).shape[0]
+    x = np.linspace(-1, 1, n)
+    X, Y = np.meshgrid(x, -x)
+    t = np.exp(-((X - 0.2) ** 2 + (Y - 0.1) ** 2) / 0.1).astype(np.float32)
+    z_on, z_off, on, fd = compare(scene, {name: t}, fd_spp=512)
+    print(f"terrain: |z| on {np.abs(z_on).max():.2f}, off {np.abs(z_off).max():.2f}")
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > 6.0, z_off
+
+
+def cells_visited(scene):
+    line = next(line for line in scene.last_stats["summary"] if line.startswith("heightfield estimator"))
+    return int(re.search(r"mipmap nodes and (\d+) cells", line).group(1))
+
+
+def test_worst_case_bump_and_the_mipmap():
+    """Figure A2: a smooth bump under a very large area light. The estimate agrees with FD; the
+    mipmap search gives the same image as the brute-force search (the same peaks) with fewer cells
+    visited, and a 5-degree theta sub-range (App. C) stays unbiased while visiting fewer still."""
+    d = scene_dict("bump")
+    scene = load(d)
+    name = "terrain.heights"
+    scene.set_differentiable([name])
+    t = {name: heights_of(d)}
+    fast = quiet(scene.render_forward, t, spp=4, seed=3)
+    fast_cells = cells_visited(scene)
+    slow = quiet(scene.render_forward, t, spp=4, seed=3, heightfield_mipmap=False)
+    slow_cells = cells_visited(scene)
+    assert any("brute force" in line for line in scene.last_stats["summary"])
+    np.testing.assert_allclose(fast, slow, rtol=1e-4, atol=1e-6)
+    print(f"bump: cells visited with the mipmap {fast_cells}, brute force {slow_cells}")
+    assert fast_cells < slow_cells
+    quiet(scene.render_forward, t, spp=4, seed=3, theta_subrange=5.0)
+    assert cells_visited(scene) < fast_cells
+    # 16 seeds: the sub-range estimate is heavier-tailed, and 8 seeds underestimate its spread.
+    fd = np.stack([limn.fd(scene, t, eps=2e-2, spp=256, seed=k, cache=False) for k in range(16)])
+    for options in ({}, {"theta_subrange": 5.0}):
+        on = np.stack([quiet(scene.render_forward, t, spp=16, seed=60 + k, **options) for k in range(16)])
+        z = block_z(on, fd)
+        assert np.abs(z).max() < 5.0, (options, z)
+
+
+def test_primal_value_of_the_estimator_is_the_image():
+    """The estimator samples differently from the path tracer but estimates the same image: with no
+    sky the image is linear in the light's radiance, so its derivative along the radiance is the
+    image itself (and the heights' zero tangent adds nothing)."""
+    d = scene_dict("cone")
+    del d["sky"]
+    scene = load(d)
+    scene.set_differentiable(["terrain.heights", "light.radiance"])
+    radiance = scene.params["light.radiance"].copy()
+    est = np.stack([quiet(scene.render_forward, {"light.radiance": radiance}, spp=64, seed=k) for k in range(6)])
+    ref = np.stack([scene.render(spp=256, seed=20 + k) for k in range(6)])
+    z = block_z(est, ref)
+    assert np.abs(z).max() < 5.0, z
+    assert abs(est.mean() - ref.mean()) < 0.02 * ref.mean()
+
+
+def test_reflectance_derivative_in_a_heightfield_scene():
+    d = scene_dict("cone")
+    scene = load(d)
+    scene.set_differentiable(["terrain.heights", "terrain.reflectance"])
+    t = {"terrain.reflectance": np.float32([1, 0, 0])}
+    fd = np.stack([limn.fd(scene, t, eps=2e-2, spp=512, seed=k, cache=False) for k in range(6)])
+    est = np.stack([quiet(scene.render_forward, t, spp=32, seed=30 + k) for k in range(6)])
+    z = block_z(est, fd)
+    assert np.abs(z).max() < 5.0, z
+    assert np.abs(est[..., 1:]).max() == 0.0  # green and blue do not depend on the red albedo
+
+
+def test_backward_matches_forward():
+    """<grad, t> of render_backward equals the adjoint-weighted forward image (same samples)."""
+    d = scene_dict("cone")
+    scene = load(d)
+    name = "terrain.heights"
+    scene.set_differentiable([name])
+    t = heights_of(d)
+    rng = np.random.default_rng(1)
+    adjoint = rng.uniform(-1, 1, (scene.height, scene.width, 3)).astype(np.float32)
+    fwd = quiet(scene.render_forward, {name: t}, spp=8, seed=5)
+    grad = quiet(scene.render_backward, adjoint, spp=8, seed=5)[name]
+    lhs, rhs = float((grad * t).sum()), float((fwd * adjoint).sum())
+    assert abs(lhs - rhs) <= 1e-3 * max(abs(rhs), 1e-6), (lhs, rhs)
+
+
+@pytest.mark.parametrize("kind", ["flat", "cliff", "spikes", "tiny", "huge"])
+def test_stiff_fields_give_finite_derivatives(kind):
+    """design.md 7: perfectly flat fields (the search's worst case), cliffs, single-texel spikes,
+    and coordinates at 1e-4 and 1e4 scale: no NaN or Inf in images or gradients."""
+    d = scene_dict("cone")
+    h = np.zeros((33, 33), np.float32)
+    if kind == "cliff":
+        h[:, 16:] = 1.0
+    elif kind == "spikes":
+        h[::5, ::7] = 3.0
+    d["terrain"]["data"] = h.tolist()
+    if kind in ("tiny", "huge"):
+        s = 1e-4 if kind == "tiny" else 1e4
+        d["terrain"]["data"] = heights_of(scene_dict("cone")).tolist()
+        d["terrain"]["to_world"] = {"scale": s}
+        d["sensor"]["to_world"]["look_at"] = {k: (np.asarray(v) * (s if k != "up" else 1)).tolist()
+                                               for k, v in d["sensor"]["to_world"]["look_at"].items()}
+        d["light"]["to_world"] = [{"scale": 0.25 * s}, {"look_at": {"origin": [1.4 * s, 0.9 * s, 0.9 * s], "target": [0, 0, 0],
+                                                                    "up": [0, 0, 1]}}]
+    scene = load(d)
+    name = "terrain.heights"
+    scene.set_differentiable([name])
+    t = np.ones((33, 33), np.float32)
+    img = quiet(scene.render_forward, {name: t}, spp=8)
+    grad = quiet(scene.render_backward, np.ones((scene.height, scene.width, 3), np.float32), spp=8)[name]
+    assert np.isfinite(img).all() and np.isfinite(grad).all()
+    assert scene.last_stats["invalid_paths"] <= 0.001 * scene.last_stats["paths"]
+    assert np.abs(img).max() > 0.0  # something was computed
+
+
+def test_heights_parameter_edits_are_seen():
+    """Editing heights through Scene.params re-renders the edited surface: the same image as a
+    scene loaded with those heights (the mipmap is updated incrementally)."""
+    d = scene_dict("cone")
+    scene = load(d)
+    h = scene.params["terrain.heights"]
+    assert h.shape == (33, 33) and h.dtype == np.float32
+    h[5:9, 20:25] += 0.8
+    scene.update()
+    d2 = scene_dict("cone")
+    d2["terrain"]["data"] = h.copy().tolist()
+    np.testing.assert_array_equal(scene.render(spp=4, seed=1), load(d2).render(spp=4, seed=1))
+    h[0, 0] = np.nan
+    with pytest.raises(ValueError, match=r"terrain.heights.*row 0, column 0 is not finite"):
+        scene.update()
+
+
+@pytest.mark.parametrize("field,value,message", [
+    ("data", [[0.0, 1.0]], r"at least 2 x 2 heights \(got 1 rows x 2 columns\)"),
+    ("data", [0.0, 1.0], r"'data' must be a 2D array"),
+    ("size", [2.0, -1.0], r"size must be two positive numbers"),
+    ("height_scale", 0.0, r"height_scale must be finite and > 0"),
+    ("filename", "missing.exr", r"missing.exr"),
+    ("emitter", {"type": "area", "radiance": 1.0}, r"a heightfield cannot be an area emitter"),
+])
+def test_bad_heightfields_are_refused_with_the_object_named(field, value, message):
+    d = scene_dict("cone")
+    if field == "filename":
+        d["terrain"]["filename"] = value  # both data and filename: the first complaint names both
+        del d["terrain"]["data"]
+    else:
+        d["terrain"][field] = value
+    with pytest.raises(ValueError, match=message) as e:
+        load(d)
+    assert "terrain" in str(e.value)
+
+
+def test_heights_from_an_image_file():
+    d = scene_dict("terrain")
+    d["terrain"]["filename"] = "terrain.exr"
+    del d["terrain"]["data"]
+    from_file = load(d)
+    from_data = load(scene_dict("terrain"))
+    np.testing.assert_allclose(from_file.params["terrain.heights"], from_data.params["terrain.heights"], atol=1e-5)
+
+
+def test_estimator_refuses_scenes_it_cannot_treat():
+    d = scene_dict("cone")
+    d["terrain"]["bsdf"] = {"type": "conductor"}
+    scene = load(d)
+    scene.set_differentiable(["terrain.heights"])
+    with pytest.raises(ValueError, match=r"bsdf .* delta .*only rough reflective BSDFs"):
+        scene.render_forward({}, spp=1)
