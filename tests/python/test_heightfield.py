@@ -38,8 +38,10 @@ def heights_of(d):
     return np.asarray(d["terrain"]["data"], np.float32)
 
 
-def compare(scene, tangents, seeds=8, spp=64, fd_spp=1024, eps=2e-2, **options):
-    """Block z-scores against FD with the reparameterisation on and off."""
+def compare(scene, tangents, seeds=16, spp=32, fd_spp=512, eps=2e-2, **options):
+    """Block z-scores against FD with the reparameterisation on and off. 16 seeds: per-sample values
+    of the estimator are heavy-tailed (hits sliding next to a tangency), and 8 seeds underestimate
+    the spread of a block now and then."""
     fd = np.stack([limn.fd(scene, tangents, eps=eps, spp=fd_spp, seed=k, cache=False) for k in range(seeds)])
     on = np.stack([quiet(scene.render_forward, tangents, spp=spp, seed=50 + k, **options) for k in range(seeds)])
     off = np.stack([quiet(scene.render_forward, tangents, spp=spp, seed=50 + k, heightfield_reparam=False, **options)
@@ -78,7 +80,7 @@ def test_moving_light_agrees_with_fd():
 
 def test_terrain_under_global_illumination_agrees_with_fd():
     """A terrain (Figure 8's kind) under a sky and an area light, two bounces; the heights change
-    by a smooth bump, which moves shadows, self-occlusion and silhouettes."""
+    by a smooth bump, which moves shadows, self-occlusion and silhouettes inside the field."""
     d = scene_dict("terrain")
     scene = load(d)
     name = "terrain.heights"
@@ -86,8 +88,11 @@ def test_terrain_under_global_illumination_agrees_with_fd():
     n = heights_of(d).shape[0]
     x = np.linspace(-1, 1, n)
     X, Y = np.meshgrid(x, -x)
-    t = np.exp(-((X - 0.2) ** 2 + (Y - 0.1) ** 2) / 0.1).astype(np.float32)
-    z_on, z_off, on, fd = compare(scene, {name: t}, fd_spp=512)
+    # Compact support: the far edge (a silhouette against the sky) stays put. A tangent that moves
+    # it by ~1e-6 (a Gaussian's tail) leaves finite differences with one flipped sample in a few
+    # renders: a reference with no usable spread.
+    t = (np.maximum(0.0, 1.0 - ((X - 0.2) ** 2 + (Y - 0.1) ** 2) / 0.3) ** 2).astype(np.float32)
+    z_on, z_off, on, fd = compare(scene, {name: t})
     print(f"terrain: |z| on {np.abs(z_on).max():.2f}, off {np.abs(z_off).max():.2f}")
     assert np.abs(z_on).max() < 5.0, z_on
     assert np.abs(z_off).max() > 6.0, z_off
