@@ -39,6 +39,16 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     import warnings
+    if args.which == "heightfield":
+        from . import heightfield_demo
+        if args.report:
+            md = heightfield_demo.report(args.report, iterations=args.iterations or 80,
+                                         argv="python3 -m limn " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["demo"] else "")
+            print(f"wrote {os.path.abspath(md)}")
+            return 0
+        summary = heightfield_demo.run(args.task, out=args.output or "out/heightfield", iterations=args.iterations or 80,
+                                       spp=args.spp if args.spp != 8 else 4)
+        return 0 if summary["final_loss"] < summary["initial_loss"] else 1
     if args.which == "shadows":
         from . import shadow_demo
         if args.report:
@@ -76,16 +86,20 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--no-preview", action="store_true", help="do not write a .png next to an .exr/.hdr output")
     r.set_defaults(func=cmd_render)
     d = sub.add_parser("demo", help="inverse shape optimisation demos with a known ground truth")
-    d.add_argument("which", nargs="?", default="multiview", choices=["multiview", "shadows"],
+    d.add_argument("which", nargs="?", default="multiview", choices=["multiview", "shadows", "heightfield"],
                    help="multiview: a bumpy shape from three images (default); shadows: a shape from its two "
-                        "shadows on a curved wall (scenes/shadow_wall)")
+                        "shadows on a curved wall (scenes/shadow_wall); heightfield: the heightfield paper's "
+                        "optimisations (--task)")
+    d.add_argument("--task", default="terrain", choices=["terrain", "shadow_art", "two_lights"],
+                   help="heightfield: terrain from four views, shadow art, or one field for two lights")
     d.add_argument("-o", "--output", default=None, help="folder for the result (PLY, renders, history.json); "
                                                         "default out/demo or out/shadows")
-    d.add_argument("--iterations", type=int, default=None, help="default 80 (multiview) or 150 (shadows)")
+    d.add_argument("--iterations", type=int, default=None, help="default 80 (multiview), 150 (shadows), 80 (heightfield)")
     d.add_argument("--spp", type=int, default=8)
     d.add_argument("--guiding", default="none", choices=["none", "grid"], help="shadows: boundary guiding")
     d.add_argument("--report", default=None, metavar="DIR",
-                   help="shadows: run shadow term on/off and both guiding modes over several seeds, write DIR/shadow_reconstruction.md")
+                   help="shadows: run shadow term on/off and both guiding modes over several seeds, write "
+                        "DIR/shadow_reconstruction.md; heightfield: all three tasks, write DIR/optimisation.md")
     d.add_argument("--seeds", type=int, default=3, help="with --report")
     d.set_defaults(func=cmd_demo)
     b = sub.add_parser("bench", help="gradient error against run time, against a finite-difference reference")

@@ -31,3 +31,33 @@ def icosphere(subdivisions: int = 2, radius: float = 1.0):
             new += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
         faces = new
     return (np.array(verts) * radius).astype(np.float32), np.array(faces, dtype=np.int64)
+
+
+# ---- heightfields: rows x columns arrays, row 0 at the far edge y = +1 (as limn's heightfield) ----
+def _grid(n: int):
+    x = np.linspace(-1.0, 1.0, n)
+    return np.meshgrid(x, -x)
+
+
+def cone_heights(n: int = 33, radius: float = 0.6) -> np.ndarray:
+    """The heightfield paper's Figure 7 cone: 1 at the centre, 0 beyond `radius`."""
+    X, Y = _grid(n)
+    return np.maximum(0.0, 1.0 - np.sqrt(X ** 2 + Y ** 2) / radius).astype(np.float32)
+
+
+def terrain_heights(n: int = 65, seed: int = 3) -> np.ndarray:
+    """A smooth random terrain: a sum of a few waves, scaled to [0, 1]."""
+    rng = np.random.default_rng(seed)
+    X, Y = _grid(n)
+    z = np.zeros_like(X)
+    for _ in range(12):
+        f = rng.uniform(1.0, 5.0)
+        a = rng.uniform(0, 2 * np.pi)
+        z += rng.uniform(0.3, 1.0) / f * np.sin(f * (np.cos(a) * X + np.sin(a) * Y) * np.pi + rng.uniform(0, 2 * np.pi))
+    return ((z - z.min()) / (z.max() - z.min())).astype(np.float32)
+
+
+def bump_heights(n: int = 65, sigma: float = 0.35) -> np.ndarray:
+    """A Gaussian bump (Figure A2's worst case for the peak search)."""
+    X, Y = _grid(n)
+    return np.exp(-(X ** 2 + Y ** 2) / (2 * sigma ** 2)).astype(np.float32)

@@ -12,36 +12,12 @@ import os
 import numpy as np
 
 import limn
+import limn.shapes
 
 here = os.path.dirname(os.path.abspath(__file__))
 
 
-def grid(n):
-    x = np.linspace(-1.0, 1.0, n)
-    X, Y = np.meshgrid(x, -x)  # row 0 is the far edge, y = +1
-    return X, Y
-
-
-def cone(n=33, radius=0.6):
-    X, Y = grid(n)
-    return np.maximum(0.0, 1.0 - np.sqrt(X ** 2 + Y ** 2) / radius)
-
-
-def terrain(n=65, seed=3):
-    """Sum of a few random smooth waves, scaled to [0, 1]."""
-    rng = np.random.default_rng(seed)
-    X, Y = grid(n)
-    z = np.zeros_like(X)
-    for k in range(12):
-        f = rng.uniform(1.0, 5.0)
-        a = rng.uniform(0, 2 * np.pi)
-        z += rng.uniform(0.3, 1.0) / f * np.sin(f * (np.cos(a) * X + np.sin(a) * Y) * np.pi + rng.uniform(0, 2 * np.pi))
-    return (z - z.min()) / (z.max() - z.min())
-
-
-def bump(n=65, sigma=0.35):
-    X, Y = grid(n)
-    return np.exp(-(X ** 2 + Y ** 2) / (2 * sigma ** 2))
+cone, terrain, bump = limn.shapes.cone_heights, limn.shapes.terrain_heights, limn.shapes.bump_heights
 
 
 def sensor(origin, target, res=32, spp=16, fov=40):

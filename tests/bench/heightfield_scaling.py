@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 
 import limn
+import limn.shapes
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 spec = importlib.util.spec_from_file_location("hf_make", os.path.join(ROOT, "scenes", "heightfield", "make.py"))
@@ -30,7 +31,7 @@ spec.loader.exec_module(make)
 
 def scene_at(name: str, n: int, film: int) -> limn.Scene:
     d = copy.deepcopy(make.SCENES[name])
-    data = make.terrain(n) if name == "terrain" else make.bump(n)
+    data = limn.shapes.terrain_heights(n) if name == "terrain" else limn.shapes.bump_heights(n)
     d["terrain"]["data"] = data.astype(np.float32)  # passed as an array, not as JSON lists
     d["sensor"]["film"]["width"] = d["sensor"]["film"]["height"] = film
     return limn.load_dict(d)
@@ -81,7 +82,7 @@ def main() -> None:
     sub = []
     scene = scene_at("bump", 512, 32)
     scene.set_differentiable(["terrain.heights"])
-    t = {"terrain.heights": make.bump(512).astype(np.float32)}
+    t = {"terrain.heights": limn.shapes.bump_heights(512)}
     for deg in (0.0, 20.0, 5.0, 1.0):
         imgs, secs = [], []
         for k in range(8):
