@@ -1,5 +1,5 @@
 """limn for Blender: render the scene with the limn differentiable renderer and optimise a mesh
-so that its renders match target images.
+(its vertices, or its heights as a limn heightfield) so that its renders match target images.
 
 Registers as a legacy add-on in Blender 3.x (bl_info) and as an extension in 4.2+
 (blender_manifest.toml). Scripts can call ``render(...)`` and ``export_scene(...)`` directly."""
@@ -47,6 +47,19 @@ class LimnSettings(bpy.types.PropertyGroup):
     iterations: bpy.props.IntProperty(name="Iterations", default=50, min=1)
     learning_rate: bpy.props.FloatProperty(name="Learning rate", default=0.01, min=1e-6, precision=4)
     large_steps_lambda: bpy.props.FloatProperty(name="Large-Steps lambda", default=20.0, min=0.0)
+    optimize_mode: bpy.props.EnumProperty(
+        name="Optimise", default="AUTO",
+        items=[("AUTO", "Detect", "Heights for objects marked as limn heightfields and meshes with an image Displace "
+                                  "modifier; vertices otherwise"),
+               ("MESH", "Mesh vertices", "Move the mesh's vertices"),
+               ("HEIGHTFIELD", "Heightfield", "Optimise heights: the image of a plane's Displace modifier, or the z of "
+                                              "a regular grid mesh")])
+    mask_vertex_group: bpy.props.StringProperty(
+        name="Mask group", description="Heightfield of a grid mesh: heights of vertices with zero weight (or outside "
+                                       "the group) stay fixed")
+    mask_image: bpy.props.PointerProperty(
+        name="Mask image", type=bpy.types.Image,
+        description="Heightfield: heights stay fixed where this image (columns x rows of the heights) is zero")
 
 
 class LIMN_PT_render(bpy.types.Panel):
@@ -67,6 +80,14 @@ class LIMN_PT_render(bpy.types.Panel):
         box = self.layout.box()
         box.label(text="Optimise geometry")
         box.prop(s, "optimize_object")
+        box.prop(s, "optimize_mode")
+        obj = s.optimize_object
+        if obj is not None:
+            box.prop(obj, "limn_heightfield")
+        if s.optimize_mode != "MESH":
+            if obj is not None:
+                box.prop_search(s, "mask_vertex_group", obj, "vertex_groups")
+            box.prop(s, "mask_image")
         for t in s.targets:
             row = box.row()
             row.prop(t, "camera", text="")
@@ -86,9 +107,14 @@ def register():
     for c in _classes:
         bpy.utils.register_class(c)
     bpy.types.Scene.limn = bpy.props.PointerProperty(type=LimnSettings)
+    bpy.types.Object.limn_heightfield = bpy.props.BoolProperty(
+        name="limn heightfield", default=False,
+        description="Render and optimise this mesh as a limn heightfield (a plane with an image Displace modifier, "
+                    "or a regular grid mesh)")
 
 
 def unregister():
+    del bpy.types.Object.limn_heightfield
     del bpy.types.Scene.limn
     for c in reversed(_classes):
         bpy.utils.unregister_class(c)

@@ -2,8 +2,10 @@
 
 Exports mesh-like objects with modifiers applied (world-space vertices, split by material), the
 active camera, point / sun / area lights, the world colour, and Principled BSDF (plus a few simple
-BSDF nodes) mapped to the closest limn BSDF. Everything that cannot be represented is listed in the
-returned warnings; nothing is dropped silently. Works with Blender 3.4 and 4.x.
+BSDF nodes) mapped to the closest limn BSDF. Objects marked as limn heightfields (the object
+property ``limn_heightfield``, or named in ``export_scene(heightfields=...)``) become limn
+``heightfield`` shapes instead (see heightfield.py). Everything that cannot be represented is listed
+in the returned warnings; nothing is dropped silently. Works with Blender 3.4 and 4.x.
 """
 from __future__ import annotations
 
@@ -13,6 +15,8 @@ import os
 
 import bpy
 import numpy as np
+
+from . import heightfield
 
 # Blender camera space looks along -Z with +Y up; limn's looks along +Z with +X to the left.
 # Rotating by 180 degrees about Y maps one onto the other.
@@ -195,6 +199,21 @@ def _export_mesh_object(obj, world, desc, warnings, used_ids):
         desc[sid] = shape
 
 
+def _export_heightfield_object(original, obj, world, desc, warnings, used_ids):
+    """A plane with an image Displace modifier or a regular grid mesh as a limn heightfield."""
+    source = heightfield.Source(original)
+    warnings.extend(source.warnings)
+    slots = [s.material for s in obj.material_slots]
+    if len([m for m in slots if m is not None]) > 1:
+        warnings.append(f"object '{original.name}': a heightfield has one material; using '{slots[0].name if slots[0] else 'none'}'")
+    mat = slots[0] if slots else None
+    bsdf, emission = convert_material(mat, warnings)
+    if emission is not None:
+        raise ValueError(f"object '{original.name}': material '{mat.name}' emits light, and a limn heightfield cannot "
+                         "be an area emitter")
+    desc[_unique(original.name, used_ids)] = source.shape(world, bsdf)
+
+
 def _unique(name: str, used: set[str]) -> str:
     base, k = name, 1
     while name in used:
@@ -285,8 +304,12 @@ def _export_world(scene, desc, warnings):
         desc["world"] = {"type": "constant", "radiance": radiance}
 
 
-def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | None = None) -> tuple[dict, list[str]]:
-    """Returns (scene description for limn.load_dict, warnings)."""
+def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | None = None,
+                 heightfields=()) -> tuple[dict, list[str]]:
+    """Returns (scene description for limn.load_dict, warnings). Mesh objects named in
+    `heightfields`, and those whose property limn_heightfield is set, are exported as limn
+    heightfields (a ValueError names the object when that is impossible)."""
+    heightfields = set(heightfields or ())
     scene = scene or bpy.context.scene
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     warnings: list[str] = []
@@ -304,7 +327,9 @@ def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | Non
         if original.hide_render:
             continue
         world = _matrix(inst.matrix_world)
-        if obj.type in MESH_TYPES:
+        if obj.type == "MESH" and (original.name in heightfields or getattr(original, "limn_heightfield", False)):
+            _export_heightfield_object(original, obj, world, desc, warnings, used_ids)
+        elif obj.type in MESH_TYPES:
             _export_mesh_object(obj, world, desc, warnings, used_ids)
         elif obj.type == "LIGHT":
             _export_light(obj, world, desc, warnings, used_ids)

@@ -6,7 +6,14 @@ Script use (also headless):
 In the UI (Properties > Render > limn > Optimise) the loop runs on a worker thread (the C++ calls
 release the GIL); a timer shows progress and the loss, writes the mesh back every few iterations
 and at the end, and Esc cancels, keeping the last state. In background mode the operator runs the
-same loop blocking and prints progress."""
+same loop blocking and prints progress.
+
+Heightfield mode optimises the heights of a limn heightfield instead (heightfield.py): a plane with
+an image Displace modifier (the heights go back into the image, a float image packed into the
+.blend) or a regular grid mesh (the heights go back into the vertices' z). Mode "AUTO" picks it for
+objects marked as limn heightfields and for meshes with an image Displace modifier. A vertex group
+(grid meshes) or a mask image can hold heights fixed where they are zero.
+    limn_blender.optimize(plane, [(camera, image), ...], mode="HEIGHTFIELD", mask_image=img)"""
 from __future__ import annotations
 
 import threading
@@ -15,7 +22,7 @@ import time
 import bpy
 import numpy as np
 
-from . import exporter
+from . import exporter, heightfield
 from .render_ops import _limn, end_worker, start_modal
 
 
@@ -34,16 +41,40 @@ def _target_pixels(target, width: int, height: int, limn) -> np.ndarray:
     return img
 
 
-class Problem:
-    """The optimisation problem built from the Blender scene (main thread only)."""
+MODES = ("AUTO", "MESH", "HEIGHTFIELD")
 
-    def __init__(self, obj, targets, spp: int):
+
+def resolve_mode(obj, mode: str) -> str:
+    """"MESH" or "HEIGHTFIELD" for the object and the chosen mode."""
+    if mode not in MODES:
+        raise ValueError(f"optimisation mode must be one of {', '.join(MODES)} (got {mode!r})")
+    if mode != "AUTO":
+        return mode
+    marked = getattr(obj, "limn_heightfield", False)
+    return "HEIGHTFIELD" if marked or heightfield.has_image_displace(obj) else "MESH"
+
+
+class Problem:
+    """The optimisation problem built from the Blender scene (main thread only): the limn scene and
+    target per camera, the parameter `name`, the Large-Steps `faces`, the `mask` (or None) and
+    write_back(x) for the mesh vertices or the heightfield's heights."""
+
+    def __init__(self, obj, targets, spp: int, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None):
         if obj is None or obj.type != "MESH":
             raise ValueError("choose a mesh object to optimise")
         if not targets:
             raise ValueError("give at least one (camera, target image) pair")
+        self.mode = resolve_mode(obj, mode)
+        if self.mode == "MESH" and getattr(obj, "limn_heightfield", False):
+            raise ValueError(f"object '{obj.name}' is marked as a limn heightfield; choose the heightfield mode or "
+                             "clear the mark to optimise its vertices")
+        if self.mode == "MESH" and (mask_vertex_group or mask_image is not None):
+            raise ValueError("masks (vertex group, mask image) are for the heightfield mode")
         self.limn = _limn()
         self.obj = obj
+        # Heights and mask first: a non-grid mesh, a bad Displace set-up or mask fails before any export.
+        self.source = heightfield.Source(obj) if self.mode == "HEIGHTFIELD" else None
+        self.mask = self.source.mask(mask_vertex_group, mask_image) if self.source else None
         scene = bpy.context.scene
         saved_camera = scene.camera
         self.views = []
@@ -52,7 +83,7 @@ class Problem:
                 if cam is None or cam.type != "CAMERA":
                     raise ValueError(f"'{getattr(cam, 'name', cam)}' is not a camera")
                 scene.camera = cam
-                desc, _ = exporter.export_scene(scene, spp=spp)
+                desc, _ = exporter.export_scene(scene, spp=spp, heightfields={obj.name} if self.source else ())
                 if obj.name not in desc:
                     raise ValueError(f"object '{obj.name}' was not exported as one shape (hidden, or several materials?)")
                 shape = desc[obj.name]
@@ -62,6 +93,11 @@ class Problem:
                 self.views.append((lscene, _target_pixels(target, w, h, self.limn)))
         finally:
             scene.camera = saved_camera
+        if self.source is not None:
+            src = self.source
+            self.name = f"{obj.name}.heights"
+            self.faces = self.limn.optim.grid_faces(src.rows, src.columns)
+            return
         self.faces = shape["faces"]
         self.name = f"{obj.name}.vertex_positions"
         n = len(obj.data.vertices)
@@ -71,34 +107,41 @@ class Problem:
                              f"({n} in the mesh, {len(welded)} rendered); apply or remove them before optimising")
         self.world = np.array([list(row) for row in obj.matrix_world], dtype=np.float64)
 
-    def write_back(self, world_positions: np.ndarray) -> None:
+    def write_back(self, x: np.ndarray, final: bool = True) -> None:
+        """Stores the parameter's value in Blender: world-space vertices into the mesh, or heights
+        into the displacement image (packed when `final`) / the grid's z."""
+        if self.source is not None:
+            self.source.write_back(x, final=final)
+            return
         inv = np.linalg.inv(self.world)
-        local = world_positions.astype(np.float64) @ inv[:3, :3].T + inv[:3, 3]
+        local = x.astype(np.float64) @ inv[:3, :3].T + inv[:3, 3]
         self.obj.data.vertices.foreach_set("co", local.astype(np.float32).ravel())
         self.obj.data.update()
 
 
 def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01, lambda_: float = 20.0,
-             progress=None) -> dict:
-    """Blocking optimisation; writes the result into the mesh. progress(iteration, loss) may return
-    False to stop. Returns {"losses": [...], "seconds": ...}."""
-    problem = Problem(obj, targets, spp)
+             progress=None, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None) -> dict:
+    """Blocking optimisation; writes the result into the mesh (or the heightfield's image / grid).
+    progress(iteration, loss) may return False to stop. Returns {"losses": [...], "seconds": ...,
+    "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD"}."""
+    problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image)
 
     def callback(it, loss, x):
         return None if progress is None else progress(it, loss)
 
     t0 = time.perf_counter()
     result = problem.limn.optim.fit(problem.views, problem.name, iterations=iterations, lr=lr, lambda_=lambda_, spp=spp,
-                                    faces=problem.faces, callback=callback)
+                                    faces=problem.faces, mask=problem.mask, callback=callback)
     problem.write_back(problem.views[0][0].params[problem.name])
-    return {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled}
+    return {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled,
+            "mode": problem.mode}
 
 
 class OptimizeJob:
     """The background optimisation behind the modal operator. start() runs limn.optim.fit on a
     worker thread (which never touches bpy); poll(), on the main thread, reports progress and
-    writes the latest vertices into the mesh every `write_every` iterations and when the run ends;
-    cancel() stops after the current iteration, keeping the last state."""
+    writes the latest vertices (or heights) into Blender every `write_every` iterations and when the
+    run ends; cancel() stops after the current iteration, keeping the last state."""
 
     def __init__(self, problem: Problem, iterations: int, spp: int, lr: float, lambda_: float, write_every: int = 5):
         self.problem, self.iterations, self.write_every = problem, iterations, write_every
@@ -107,7 +150,7 @@ class OptimizeJob:
         self._state = {"it": -1, "loss": float("nan"), "x": None, "done": False, "error": None}
         self._cancel = False
         self._written = -1
-        self.writes = 0  # how often poll() wrote the mesh (progress shown in the viewport)
+        self.writes = 0  # how often poll() wrote the result (progress shown in the viewport)
         self._thread = None
 
     def start(self) -> None:
@@ -122,7 +165,7 @@ class OptimizeJob:
         def work():
             try:
                 problem.limn.optim.fit(problem.views, problem.name, iterations=self.iterations, spp=spp, lr=lr,
-                                       lambda_=lambda_, faces=problem.faces, callback=callback)
+                                       lambda_=lambda_, faces=problem.faces, mask=problem.mask, callback=callback)
                 with self._lock:
                     state["x"] = problem.views[0][0].params[problem.name].copy()
             except Exception as e:  # reported by poll() on the main thread
@@ -140,7 +183,7 @@ class OptimizeJob:
         with self._lock:
             it, loss, x, done, error = (self._state[k] for k in ("it", "loss", "x", "done", "error"))
         if x is not None and (done or it - self._written >= self.write_every):
-            self.problem.write_back(x)
+            self.problem.write_back(x, final=done)
             self._written = it
             self.writes += 1
         status = "running" if not done else ("error" if error is not None else ("cancelled" if self._cancel else "finished"))
@@ -166,8 +209,13 @@ class LIMN_OT_target_add(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _mode_inputs(s) -> dict:
+    """The panel's mode and masks as keyword arguments of Problem / optimize."""
+    return {"mode": s.optimize_mode, "mask_vertex_group": s.mask_vertex_group, "mask_image": s.mask_image}
+
+
 class LIMN_OT_optimize(bpy.types.Operator):
-    """Optimise the chosen mesh so that limn's renders match the target images"""
+    """Optimise the chosen mesh (its vertices, or its heights as a limn heightfield) so that limn's renders match the target images"""
     bl_idname = "limn.optimize"
     bl_label = "Optimise with limn"
     bl_options = {"REGISTER", "UNDO"}
@@ -184,7 +232,8 @@ class LIMN_OT_optimize(bpy.types.Operator):
                 if it % 5 == 0 or it == s.iterations - 1:
                     print(f"limn: iteration {it + 1}/{s.iterations}  loss {loss:.6f}", flush=True)
             try:
-                out = optimize(s.optimize_object, targets, s.iterations, s.spp, s.learning_rate, s.large_steps_lambda, report)
+                out = optimize(s.optimize_object, targets, s.iterations, s.spp, s.learning_rate, s.large_steps_lambda, report,
+                               **_mode_inputs(s))
             except (ValueError, RuntimeError) as e:
                 self.report({"ERROR"}, str(e))
                 return {"CANCELLED"}
@@ -197,7 +246,7 @@ class LIMN_OT_optimize(bpy.types.Operator):
 
     def _start(self, context, s, targets):
         try:
-            problem = Problem(s.optimize_object, targets, s.spp)
+            problem = Problem(s.optimize_object, targets, s.spp, **_mode_inputs(s))
         except (ValueError, RuntimeError) as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}

@@ -112,3 +112,70 @@ def build_cornell(size=256, max_depth=8):
     # Cycles' bounces are limn's max_depth - 2 (max_bounces = 0 is direct lighting).
     cycles.max_bounces = cycles.diffuse_bounces = cycles.glossy_bounces = cycles.transmission_bounces = max_depth - 2
     return scene
+
+
+def bumps(n=17):
+    """Ground-truth heights for the heightfield tests: a smooth bump, rows x columns with row 0 the
+    far edge (limn's heightfield order)."""
+    import numpy as np
+    x = np.linspace(-1.0, 1.0, n)
+    X, Y = np.meshgrid(x, -x)
+    return np.exp(-(X ** 2 + Y ** 2) / (2 * 0.35 ** 2)).astype(np.float32)
+
+
+def _look_at(obj, target):
+    from mathutils import Vector
+    direction = Vector(target) - obj.location
+    obj.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler()
+
+
+def build_heightfield(kind="displace", n=17, res=24):
+    """A heightfield scene: kind "displace" is a 2 x 2 plane with a Subdivision (simple) and a Displace
+    modifier reading the float image "heights" (n x n, mid-level 0.5, strength 0.5: flat at 0.5);
+    kind "grid" is an n x n vertex grid of size 2 (flat). Two cameras ("cam_front", "cam_side",
+    res x res pixels) look at it under an area light ("lamp", aimed at the origin from a low angle)
+    and a grey world; 1 bounce (limn max_depth 3). Returns the scene."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.resolution_x = scene.render.resolution_y = res
+    scene.render.resolution_percentage = 100
+    if getattr(scene, "cycles", None) is not None:
+        scene.cycles.max_bounces = 1
+    if kind == "displace":
+        bpy.ops.mesh.primitive_plane_add(size=2.0)
+        obj = bpy.context.active_object
+        obj.name = "terrain"
+        obj.modifiers.new("subdivide", "SUBSURF").subdivision_type = "SIMPLE"
+        obj.modifiers["subdivide"].levels = obj.modifiers["subdivide"].render_levels = 4
+        img = bpy.data.images.new("heights", n, n, float_buffer=True)
+        img.pixels.foreach_set([0.5] * (n * n * 4))
+        tex = bpy.data.textures.new("heights", "IMAGE")
+        tex.image = img
+        mod = obj.modifiers.new("displace", "DISPLACE")
+        mod.texture, mod.texture_coords, mod.direction = tex, "UV", "NORMAL"
+        mod.strength, mod.mid_level = 0.5, 0.5
+    else:
+        bpy.ops.mesh.primitive_grid_add(x_subdivisions=n - 1, y_subdivisions=n - 1, size=2.0)
+        obj = bpy.context.active_object
+        obj.name = "terrain"
+        assert len(obj.data.vertices) == n * n, len(obj.data.vertices)  # subdivisions are cuts since 3.0
+    obj.data.materials.append(_diffuse("terrain_mat", (0.6, 0.6, 0.6)))
+
+    bpy.ops.object.light_add(type="AREA", location=(2.0, 0.5, 1.2))
+    lamp = bpy.context.active_object
+    lamp.name = "lamp"
+    lamp.data.size = 1.0
+    lamp.data.energy = 60.0  # radiance 60 / (4 * 1 m^2) = 15 in limn
+    _look_at(lamp, (0, 0, 0))
+    for name, loc in (("cam_front", (0.0, -2.5, 2.5)), ("cam_side", (2.5, 0.0, 2.5))):
+        bpy.ops.object.camera_add(location=loc)
+        cam = bpy.context.active_object
+        cam.name = name
+        cam.data.lens = 43.5  # about 45 degrees across the 36 mm sensor
+        _look_at(cam, (0, 0, 0))
+    scene.camera = bpy.data.objects["cam_front"]
+    world = bpy.data.worlds.new("world")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.1, 0.1, 0.1, 1.0)
+    scene.world = world
+    return scene

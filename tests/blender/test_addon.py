@@ -244,3 +244,243 @@ def test_optimise_operator_reports_bad_input(addon):
     s.optimize_object = bpy.data.objects["ball"]
     with pytest.raises(RuntimeError, match="at least one"):
         bpy.ops.limn.optimize()
+
+
+# ---- heightfields --------------------------------------------------------------------------------
+def _heightfield_addon(kind):
+    scene_builder.build_heightfield(kind)
+    addon_utils.enable("limn_blender", default_set=True)
+    import limn_blender
+    from limn_blender.render_ops import _limn
+    return limn_blender, _limn()
+
+
+def _set_image(img, value):
+    """Stores (rows, columns) values, row 0 the top row, in every colour channel of `img`."""
+    rgba = np.ones((img.size[1], img.size[0], 4), np.float32)
+    rgba[..., :3] = np.asarray(value, np.float32)[::-1, :, None]
+    img.pixels.foreach_set(rgba.ravel())
+    img.update()
+
+
+def _image_values(img):
+    px = np.empty(img.size[0] * img.size[1] * 4, np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(img.size[1], img.size[0], 4)[::-1, :, 0]
+
+
+def _grid_z(obj):
+    co = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
+def _heightfield_targets(addon, limn, cameras, spp=64):
+    """Renders of the current Blender scene (terrain as a heightfield) from each camera."""
+    scene = bpy.context.scene
+    out = []
+    for cam in cameras:
+        scene.camera = cam
+        desc, _ = addon.export_scene(spp=spp, heightfields={"terrain"})
+        out.append(limn.load_dict(desc).render(spp=spp, seed=11))
+    scene.camera = cameras[0]
+    return out
+
+
+def _image_loss(addon, limn, cameras, targets):
+    """Mean squared error of 32-spp renders against the targets (less noisy than fit's 4-spp losses)."""
+    return float(np.mean([((r - t) ** 2).mean() for r, t in zip(_heightfield_targets(addon, limn, cameras, 32), targets)]))
+
+
+def _float_image(name, pixels):
+    h, w = pixels.shape[:2]
+    img = bpy.data.images.new(name, w, h, float_buffer=True)
+    rgba = np.ones((h, w, 4), np.float32)
+    rgba[..., :3] = pixels[::-1]
+    img.pixels.foreach_set(rgba.ravel())
+    return img
+
+
+def test_heightfield_export_of_a_displaced_plane_and_a_grid():
+    """Orientation (image top row = far edge), size, height scale and placement; the heightfield
+    renders like Blender's own displaced mesh; objects are converted only when marked or named."""
+    addon, limn = _heightfield_addon("displace")
+    obj = bpy.data.objects["terrain"]
+    n = 17
+    u = (np.arange(n) + 0.5) / n                 # Blender samples pixel j around u = (j + 1/2) / n
+    X, Y = np.meshgrid(2 * u - 1, 1 - 2 * u)     # rows top first: y = +1 first
+    bump = 0.3 * np.exp(-((X - 0.5) ** 2 + (Y - 0.4) ** 2) / 0.1)  # off-centre: catches flips
+    img = obj.modifiers["displace"].texture.image
+    _set_image(img, bump / 0.5 + 0.5)            # strength 0.5, mid-level 0.5
+    obj.update_tag()
+    desc, warnings = addon.export_scene(spp=16)
+    assert desc["terrain"]["type"] == "mesh"     # not marked, not the optimisation target
+    mesh_render = limn.load_dict(desc).render(spp=64, seed=1)
+    obj.limn_heightfield = True
+    desc, warnings = addon.export_scene(spp=16)
+    hf = desc["terrain"]
+    assert hf["type"] == "heightfield" and warnings == []
+    assert hf["data"].shape == (n, n) and hf["size"] == pytest.approx([2, 2]) and hf["height_scale"] == pytest.approx(0.5)
+    np.testing.assert_allclose(hf["data"] * hf["height_scale"], bump, atol=1e-6)
+    assert np.unravel_index(np.argmax(hf["data"]), hf["data"].shape) == (5, 12)  # x = 0.5 -> column 12, y = 0.4 -> row 5
+    hf_render = limn.load_dict(desc).render(spp=64, seed=1)
+    blocks = lambda im: im.reshape(6, 4, 6, 4, 3).mean(axis=(1, 3))
+    print(f"heightfield vs displaced mesh: mean {hf_render.mean():.4f} / {mesh_render.mean():.4f}, "
+          f"largest 4x4-block difference {np.abs(blocks(hf_render) - blocks(mesh_render)).max():.4f}")
+    assert abs(hf_render.mean() / mesh_render.mean() - 1) < 0.03
+    assert np.abs(blocks(hf_render) - blocks(mesh_render)).max() < 0.1 * mesh_render.max()
+    # Placement: translation, rotation about z, non-uniform scale (x, y into size, z into height_scale).
+    obj.location, obj.rotation_euler, obj.scale = (0.5, -0.2, 0.1), (0, 0, math.radians(30)), (1.5, 0.5, 2.0)
+    bpy.context.view_layer.update()
+    hf = addon.export_scene(spp=16)[0]["terrain"]
+    assert hf["size"] == pytest.approx([3.0, 1.0]) and hf["height_scale"] == pytest.approx(1.0)
+    c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
+    np.testing.assert_allclose(hf["to_world"], [[c, -s, 0, 0.5], [s, c, 0, -0.2], [0, 0, 1, 0.1], [0, 0, 0, 1]], atol=1e-6)
+    obj.modifiers["displace"].texture_coords = "LOCAL"
+    with pytest.raises(ValueError, match=r"object 'terrain', modifier 'displace': texture coordinates must be UV \(got LOCAL\)"):
+        addon.export_scene()
+
+    # A grid mesh: heights are the vertices' z, exactly.
+    addon, limn = _heightfield_addon("grid")
+    obj = bpy.data.objects["terrain"]
+    co = _grid_z(obj)
+    co[:, 2] = 0.3 * np.exp(-((co[:, 0] - 0.5) ** 2 + (co[:, 1] - 0.4) ** 2) / 0.1)
+    obj.data.vertices.foreach_set("co", co.ravel())
+    obj.data.update()
+    hf = addon.export_scene(spp=16, heightfields={"terrain"})[0]["terrain"]
+    x = np.linspace(-1, 1, n)
+    X, Y = np.meshgrid(x, -x)
+    np.testing.assert_allclose(hf["data"], 0.3 * np.exp(-((X - 0.5) ** 2 + (Y - 0.4) ** 2) / 0.1), atol=1e-6)
+    assert hf["size"] == pytest.approx([2, 2]) and hf["height_scale"] == 1.0
+
+
+def test_heightfield_optimisation_of_a_displaced_plane():
+    """Targets from a known bump in the displacement image; starting from a flat 8-bit image, the
+    loss and the height error fall; the heights go into a new float image (packed, the texture
+    points at it), the masked border stays at the mid-level; the background job does the same."""
+    addon, limn = _heightfield_addon("displace")
+    obj = bpy.data.objects["terrain"]
+    tex = obj.modifiers["displace"].texture
+    cams = [bpy.data.objects["cam_front"], bpy.data.objects["cam_side"]]
+    truth = scene_builder.bumps(17)              # heights; strength 0.5 makes them 0.5 * truth high
+    _set_image(tex.image, truth + 0.5)           # pixel = height + mid-level
+    targets = _heightfield_targets(addon, limn, cams)
+    flat = bpy.data.images.new("flat", 17, 17)   # an 8-bit image: 128 / 255, nearly the mid-level
+    _set_image(flat, np.full((17, 17), 0.5))
+    tex.image = flat
+    mask = np.zeros((17, 17))
+    mask[1:-1, 1:-1] = 1.0                       # the border is held fixed
+    mask_img = _float_image("mask", np.repeat(mask[:, :, None], 3, axis=2))
+    target_imgs = [(c, _float_image(f"target_{c.name}", t)) for c, t in zip(cams, targets)]
+    start = (_image_values(flat) - 0.5).astype(np.float32)
+    loss0 = _image_loss(addon, limn, cams, targets)
+    rms = lambda h: float(np.sqrt(((h - truth) ** 2).mean()))
+
+    out = addon.optimize(obj, target_imgs, iterations=40, spp=4, lr=0.1, lambda_=3.0, mask_image=mask_img)
+    img = tex.image
+    assert out["mode"] == "HEIGHTFIELD"          # detected: the target has an image Displace modifier
+    assert img is not flat and img.is_float and img.packed_file is not None
+    assert img.size[:] == (17, 17) and img.colorspace_settings.name == "Non-Color"
+    np.testing.assert_array_equal(_image_values(flat) - 0.5, start)  # the 8-bit image is left alone
+    heights = _image_values(img) - 0.5           # the inverse mapping
+    loss1 = _image_loss(addon, limn, cams, targets)
+    L = out["losses"]
+    print(f"displaced plane: loss {np.mean(L[:3]):.5f} -> {np.mean(L[-5:]):.5f} (32 spp: {loss0:.5f} -> {loss1:.5f}), "
+          f"height RMS error {rms(start):.3f} -> {rms(heights):.3f}, {out['seconds']:.1f} s")
+    assert np.mean(L[-5:]) < 0.9 * np.mean(L[:3]), L
+    assert loss1 < 0.6 * loss0, (loss0, loss1)
+    assert rms(heights) < 0.5 * rms(start)
+    np.testing.assert_array_equal(heights[mask == 0], start[mask == 0])
+    # The written image is what the next export reads, and Blender's modifier sees it.
+    obj.limn_heightfield = True
+    np.testing.assert_allclose(addon.export_scene(spp=4)[0]["terrain"]["data"], heights, atol=1e-6)
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    assert max(v.co.z for v in evaluated.data.vertices) > 0.2
+
+    # The UI's background job: progress, write-back while running and at the end (packed again).
+    before = heights.copy()
+    job = addon.optimize_ops.OptimizeJob(addon.optimize_ops.Problem(obj, target_imgs, 4, mask_image=mask_img),
+                                         iterations=4, spp=4, lr=0.1, lambda_=3.0, write_every=2)
+    job.start()
+    while (status := job.poll())["status"] == "running":
+        time.sleep(0.02)
+    assert status["status"] == "finished" and "iteration 4/4" in status["message"], status
+    assert job.writes >= 2 and tex.image is img and img.packed_file is not None
+    assert not np.array_equal(_image_values(img) - 0.5, before)
+
+
+def test_heightfield_optimisation_of_a_grid_mesh():
+    """The operator in heightfield mode on a flat grid mesh, targets from a known bump in the
+    vertices' z; a vertex group holds the border fixed. Loss and height error fall; the vertices'
+    z are the result (x, y untouched); one undo brings the flat grid back."""
+    addon, limn = _heightfield_addon("grid")
+    obj = bpy.data.objects["terrain"]
+    cams = [bpy.data.objects["cam_front"], bpy.data.objects["cam_side"]]
+    n = 17
+    co = _grid_z(obj)
+    source = addon.heightfield.Source(obj)
+    truth = 0.5 * scene_builder.bumps(n)         # z of the grid, rows x columns
+    co_true = co.copy()
+    co_true[source.order, 2] = truth.ravel()
+    obj.data.vertices.foreach_set("co", co_true.ravel())
+    obj.data.update()
+    targets = _heightfield_targets(addon, limn, cams)
+    obj.data.vertices.foreach_set("co", co.ravel())  # back to flat
+    obj.data.update()
+    border = (np.abs(co[:, 0]) > 0.99) | (np.abs(co[:, 1]) > 0.99)
+    group = obj.vertex_groups.new(name="inner")
+    group.add([int(i) for i in np.flatnonzero(~border)], 1.0, "REPLACE")
+    loss0 = _image_loss(addon, limn, cams, targets)
+
+    s = bpy.context.scene.limn
+    s.optimize_object, s.optimize_mode, s.mask_vertex_group = obj, "HEIGHTFIELD", "inner"
+    for c, t in zip(cams, targets):
+        target = s.targets.add()
+        target.camera, target.image = c, _float_image(f"target_{c.name}", t)
+    s.iterations, s.spp, s.learning_rate, s.large_steps_lambda = 40, 4, 0.05, 3.0
+    t0 = time.perf_counter()
+    bpy.ops.ed.undo_push(message="before limn")
+    assert bpy.ops.limn.optimize("EXEC_DEFAULT", True) == {"FINISHED"}  # True: push an undo step, as the UI does
+    seconds = time.perf_counter() - t0
+    after = _grid_z(obj)
+    heights = after[source.order, 2].reshape(n, n)
+    loss1 = _image_loss(addon, limn, cams, targets)
+    rms = lambda h: float(np.sqrt(((h - truth) ** 2).mean()))
+    print(f"grid mesh: loss (32 spp) {loss0:.5f} -> {loss1:.5f}, height RMS error {rms(np.zeros_like(truth)):.3f} -> "
+          f"{rms(heights):.3f}, {seconds:.1f} s")
+    assert loss1 < 0.6 * loss0, (loss0, loss1)
+    assert rms(heights) < 0.5 * rms(np.zeros_like(truth))
+    np.testing.assert_array_equal(after[:, :2], co[:, :2])  # only z moves
+    assert (after[border, 2] == 0).all() and np.abs(after[~border, 2]).max() > 0.1
+    bpy.ops.ed.undo()                             # the whole run is one undo step
+    np.testing.assert_array_equal(_grid_z(bpy.data.objects["terrain"]), co)
+
+
+def test_heightfield_mode_refuses_what_is_not_a_heightfield(addon):
+    """A UV sphere is not a grid; an unevenly spaced grid is not regular; the errors name the object."""
+    ball = bpy.data.objects["ball"]
+    s = bpy.context.scene.limn
+    s.optimize_object, s.optimize_mode = ball, "HEIGHTFIELD"
+    t = s.targets.add()
+    t.camera, t.image = bpy.data.objects["camera"], bpy.data.images.new("target", 64, 48, float_buffer=True)
+    with pytest.raises(RuntimeError, match=r"object 'ball' is not a regular grid in its local x, y: its 482 vertices"):
+        bpy.ops.limn.optimize()
+    with pytest.raises(ValueError, match=r"object 'ball' is not a regular grid"):
+        addon.optimize(ball, [(t.camera, t.image)], mode="HEIGHTFIELD")
+    ball.limn_heightfield = True                  # marked objects are converted by every export
+    with pytest.raises(ValueError, match=r"object 'ball' is not a regular grid"):
+        addon.export_scene()
+    ball.limn_heightfield = False
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=4, y_subdivisions=4, size=2.0)
+    grid = bpy.context.active_object
+    grid.name = "uneven"
+    co = _grid_z(grid)
+    co[np.isclose(co[:, 0], 0.5), 0] = 0.6        # one column moved
+    grid.data.vertices.foreach_set("co", co.ravel())
+    with pytest.raises(ValueError, match=r"object 'uneven' is not a regular grid: its x values are not evenly spaced"):
+        addon.heightfield.Source(grid)
+    co[np.isclose(co[:, 0], 0.6), 0] = 0.5        # regular again; the mask names a group it lacks
+    grid.data.vertices.foreach_set("co", co.ravel())
+    s.optimize_object, s.mask_vertex_group = grid, "missing"
+    with pytest.raises(RuntimeError, match=r"object 'uneven' has no vertex group 'missing'"):
+        bpy.ops.limn.optimize()
