@@ -45,7 +45,7 @@ MODES = ("AUTO", "MESH", "HEIGHTFIELD")
 
 
 def resolve_mode(obj, mode: str) -> str:
-    """"MESH" or "HEIGHTFIELD" for the object and the chosen mode."""
+    """Returns "MESH" or "HEIGHTFIELD" for the object and the chosen mode ("AUTO", "MESH", "HEIGHTFIELD")."""
     if mode not in MODES:
         raise ValueError(f"optimisation mode must be one of {', '.join(MODES)} (got {mode!r})")
     if mode != "AUTO":
@@ -69,7 +69,8 @@ class Problem:
             raise ValueError(f"object '{obj.name}' is marked as a limn heightfield; choose the heightfield mode or "
                              "clear the mark to optimise its vertices")
         if self.mode == "MESH" and (mask_vertex_group or mask_image is not None):
-            raise ValueError("masks (vertex group, mask image) are for the heightfield mode")
+            raise ValueError(f"object '{obj.name}' is optimised as mesh vertices; masks (vertex group, mask image) "
+                             "are for the heightfield mode")
         self.limn = _limn()
         self.obj = obj
         # Heights and mask first: a non-grid mesh, a bad Displace set-up or mask fails before any export.
@@ -210,7 +211,10 @@ class LIMN_OT_target_add(bpy.types.Operator):
 
 
 def _mode_inputs(s) -> dict:
-    """The panel's mode and masks as keyword arguments of Problem / optimize."""
+    """The panel's mode and masks as keyword arguments of Problem / optimize (the panel hides the
+    masks in mesh mode, so they are not passed then)."""
+    if s.optimize_mode == "MESH":
+        return {"mode": "MESH"}
     return {"mode": s.optimize_mode, "mask_vertex_group": s.mask_vertex_group, "mask_image": s.mask_image}
 
 

@@ -470,7 +470,11 @@ def test_heightfield_mode_refuses_what_is_not_a_heightfield(addon):
     ball.limn_heightfield = True                  # marked objects are converted by every export
     with pytest.raises(ValueError, match=r"object 'ball' is not a regular grid"):
         addon.export_scene()
+    with pytest.raises(ValueError, match=r"object 'ball' is marked as a limn heightfield; choose the heightfield mode"):
+        addon.optimize(ball, [(t.camera, t.image)], mode="MESH")
     ball.limn_heightfield = False
+    with pytest.raises(ValueError, match=r"object 'ball' is optimised as mesh vertices; masks"):
+        addon.optimize(ball, [(t.camera, t.image)], mask_image=t.image)  # "AUTO": a sphere is a mesh
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=4, y_subdivisions=4, size=2.0)
     grid = bpy.context.active_object
     grid.name = "uneven"
@@ -484,3 +488,24 @@ def test_heightfield_mode_refuses_what_is_not_a_heightfield(addon):
     s.optimize_object, s.mask_vertex_group = grid, "missing"
     with pytest.raises(RuntimeError, match=r"object 'uneven' has no vertex group 'missing'"):
         bpy.ops.limn.optimize()
+
+
+def test_heightfield_write_back_into_an_openexr_file_image(tmp_path):
+    """A float OpenEXR height image is written in place (same datablock, packed); heights round-trip."""
+    addon, limn = _heightfield_addon("displace")
+    obj = bpy.data.objects["terrain"]
+    tex = obj.modifiers["displace"].texture
+    path = str(tmp_path / "heights.exr")
+    limn.write_image(path, np.full((9, 13, 3), 0.5, np.float32))  # 13 columns x 9 rows
+    tex.image = img = bpy.data.images.load(path)
+    source = addon.heightfield.Source(obj)
+    assert (source.rows, source.columns) == (9, 13) and source.warnings == []
+    h = np.linspace(-0.3, 0.4, 9 * 13, dtype=np.float32).reshape(9, 13)
+    source.write_back(h)
+    assert tex.image is img and img.packed_file is not None
+    np.testing.assert_allclose(_image_values(img), h + 0.5, atol=1e-6)
+    np.testing.assert_allclose(addon.heightfield.Source(obj).heights, h, atol=1e-6)
+    obj.modifiers["displace"].strength = -0.5     # negative strength: heights flip sign, height_scale stays > 0
+    flipped = addon.heightfield.Source(obj)
+    np.testing.assert_allclose(flipped.heights, -h, atol=1e-6)
+    assert flipped.height_scale == pytest.approx(0.5)
