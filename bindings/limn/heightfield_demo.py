@@ -3,8 +3,9 @@ Large-Steps (Laplacian) preconditioner on the grid of heights: ``python3 -m limn
 
 - terrain (Figure 8): a terrain recovered from a flat plane from four views under a sky and a
   sun-like area light; the height error against the ground truth is known.
-- shadow art (Figure 3): the right half of the field must cast a target shadow (a disc) onto the
-  left half, which is held at zero so the shadow cannot come from shading alone.
+- shadow art (Figure 3): the right half of the field must cast a target shadow onto the left half,
+  which is held at zero so the shadow cannot come from shading alone (the target is rendered from a
+  known right half, so it is a shadow a field can cast).
 - two lights (Figure 1): one field, two lighting conditions, two different target images (ridges
   along x under one light, along y under the other); the field has to serve both.
 
@@ -67,22 +68,21 @@ def problem(task: str):
         views = [(load_dict(view(flat, o, sun)), t) for o, t in zip(origins, targets)]
         return views, None, truth, "terrain from four views (Figure 8)"
     if task == "shadow_art":
-        # Looking down (image left = world -x); a low light from +x; the target darkens a disc on
-        # the left half.
-        # A flat start casts no shadow and so has no shadow derivative: the free half starts from a
-        # gentle random relief (the paper's CLIP task needs a bumpy start for the same reason).
+        # Looking down (image left = world -x) with a low light from +x: the left half is held at zero,
+        # so the target shadow on it can only come from the right half. The target is rendered from a
+        # known right half (a ridge near the middle), so the shadow is one a field can cast. A flat
+        # start casts no shadow and so has no shadow derivative: the free half starts from a gentle
+        # random relief (the paper's CLIP task needs a bumpy start for the same reason).
         x = np.linspace(-1, 1, N)
-        free = np.meshgrid(x, x)[0] > 0.0
+        X, Y = np.meshgrid(x, -x)
+        free = X > 0.0
+        truth = np.where(free, 1.2 * np.exp(-((X - 0.3) ** 2 / 0.02 + Y ** 2 / 0.15)), 0.0).astype(np.float32)
         start = np.where(free, 0.3 * terrain_heights(N, seed=11), 0.0).astype(np.float32)
         sun = (2.6, 0.0, 0.45)
-        target = load_dict(view(flat, (0, 0, 3.2), sun, sky=0.05, radiance=60.0)).render(spp=256, seed=901)
+        target = load_dict(view(truth, (0, 0, 3.2), sun, sky=0.05, radiance=60.0)).render(spp=256, seed=901)
         lit = load_dict(view(start, (0, 0, 3.2), sun, sky=0.05, radiance=60.0))
-        h, w = target.shape[:2]
-        yy, xx = np.mgrid[0:h, 0:w]
-        disc = ((xx - 0.3 * w) ** 2 + (yy - 0.5 * h) ** 2) < (0.14 * w) ** 2
-        target[disc] *= 0.15
         mask = free.astype(np.float32).ravel()  # the left half (x <= 0) stays at 0
-        return [(lit, target)], mask, None, "shadow art with the left half held at zero (Figure 3)"
+        return [(lit, target)], mask, truth, "shadow art with the left half held at zero (Figure 3)"
     if task == "two_lights":
         a, b = (2.0, 0.4, 1.0), (-0.4, 2.0, 1.0)
         t1 = load_dict(view(ridges("x"), (0, 0, 3.0), a, sky=0.1)).render(spp=256, seed=902)

@@ -43,11 +43,12 @@ class Adam:
 
 def grid_faces(rows: int, columns: int) -> np.ndarray:
     """Triangles (F x 3) of a rows x columns grid of points indexed row-major: the connectivity a
-    heightfield's Laplacian is taken over (Large Steps on heights)."""
+    heightfield's Laplacian is taken over (Large Steps on heights). With row 0 at the far edge (+y)
+    and column 0 at -x, as limn's heightfields, they wind counter-clockwise seen from +z (face up)."""
     r, c = np.meshgrid(np.arange(rows - 1), np.arange(columns - 1), indexing="ij")
     a = (r * columns + c).ravel()
-    b, d, e = a + 1, a + columns, a + columns + 1
-    return np.concatenate([np.stack([a, b, e], 1), np.stack([a, e, d], 1)]).astype(np.int64)
+    b, d, e = a + 1, a + columns, a + columns + 1  # right, below (towards -y), diagonal
+    return np.concatenate([np.stack([a, e, b], 1), np.stack([a, d, e], 1)]).astype(np.int64)
 
 
 class LargeSteps:

@@ -61,3 +61,23 @@ def bump_heights(n: int = 65, sigma: float = 0.35) -> np.ndarray:
     """A Gaussian bump (Figure A2's worst case for the peak search)."""
     X, Y = _grid(n)
     return np.exp(-(X ** 2 + Y ** 2) / (2 * sigma ** 2)).astype(np.float32)
+
+
+def bspline_at_grid(heights: np.ndarray) -> np.ndarray:
+    """limn's heightfield surface (uniform cubic B-spline, edge rows repeated) at its grid points:
+    1/6, 4/6, 1/6 of the neighbouring control heights in each direction."""
+    p = np.pad(np.asarray(heights, np.float64), 1, mode="edge")
+    rows = (p[:-2] + 4 * p[1:-1] + p[2:]) / 6.0
+    return (rows[:, :-2] + 4 * rows[:, 1:-1] + rows[:, 2:]) / 6.0
+
+
+def heightfield_as_mesh(heights: np.ndarray, size=(2.0, 2.0), height_scale: float = 1.0):
+    """Vertices (N x 3, float32, local frame) and faces (F x 3, facing +z) of a heightfield's surface
+    sampled at its grid points: the same surface as a triangle mesh (for comparisons and export)."""
+    from .optim import grid_faces
+    n_r, n_c = np.shape(heights)
+    x = (np.arange(n_c) / (n_c - 1) - 0.5) * size[0]
+    y = (0.5 - np.arange(n_r) / (n_r - 1)) * size[1]
+    X, Y = np.meshgrid(x, y)
+    Z = height_scale * bspline_at_grid(heights)
+    return np.stack([X, Y, Z], -1).reshape(-1, 3).astype(np.float32), grid_faces(n_r, n_c)
