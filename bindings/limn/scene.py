@@ -157,7 +157,7 @@ class Scene:
             warnings.warn(f"{self._native.source}: {stats['invalid_paths']} paths with non-finite values or derivatives were dropped",
                           stacklevel=3)
         for line in stats["summary"]:
-            if "NOT COMPUTED" in line:
+            if "NOT COMPUTED" in line or line.startswith("warning:"):
                 warnings.warn(f"{self._native.source}: {line}", stacklevel=3)
 
     def render_forward(self, tangents: dict, spp: int | None = None, seed: int = 0, *, spp_interior: int | None = None,

@@ -45,6 +45,31 @@ HeightSample Heightfield::eval(double x, double y) const {
   return out;
 }
 
+HeightSample Heightfield::eval_slopes(double x, double y) const {
+  const PatchCoords p = patch(x, y);
+  double bc[4], dbc[4], br[4], dbr[4], unused[4];
+  bspline_basis(p.fc, bc, dbc, unused);
+  bspline_basis(p.fr, br, dbr, unused);
+  double z = 0, zc = 0, zr = 0;
+  for (int b = 0; b < 4; ++b) {
+    double row = 0, drow = 0;
+    for (int a = 0; a < 4; ++a) {
+      const double h = heights[p.index[b][a]];
+      row += bc[a] * h;
+      drow += dbc[a] * h;
+    }
+    z += br[b] * row;
+    zc += br[b] * drow;
+    zr += dbr[b] * row;
+  }
+  const double s = height_scale;
+  HeightSample out;
+  out.z = s * z;
+  out.dx = s * zc * (nx - 1) / double(width);
+  out.dy = -s * zr * (ny - 1) / double(depth);
+  return out;
+}
+
 // ---- maximum mipmap ---------------------------------------------------------------------------------
 namespace {
 void cell_bounds(const Heightfield& hf, int c0, int r0, float& lo, float& hi) {

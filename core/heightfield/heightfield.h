@@ -86,6 +86,8 @@ struct Heightfield {
   bool inside(double x, double y) const { return std::abs(x) <= 0.5 * width && std::abs(y) <= 0.5 * depth; }
   PatchCoords patch(double x, double y) const;
   HeightSample eval(double x, double y) const;
+  // Height and slopes only (z, dx, dy; the curvatures are left 0): the peak search's inner loop.
+  HeightSample eval_slopes(double x, double y) const;
 
   // Nearest hit of a local-frame ray with t in (tmin, tmax) (t is the same in world space when
   // the ray direction is mapped without normalising). `cells` counts level-0 cells solved.

@@ -272,3 +272,18 @@ def test_heightfield_renders_like_its_triangulation():
     a, b = load(d).render(spp=256, seed=1), load(m).render(spp=256, seed=2)
     assert abs(a.mean() - b.mean()) < 0.01 * a.mean()
     assert np.abs(a - b).mean() < 0.05 * a.mean()
+
+
+def test_other_occluders_are_counted_and_warned():
+    """A static box over the cone: its silhouettes are not split by the estimator, so the call
+    warns (with the count) instead of silently returning a possibly biased derivative."""
+    d = scene_dict("cone")
+    d["box"] = {"type": "cube", "to_world": [{"scale": 0.15}, {"translate": [0.6, 0.4, 0.7]}],
+                "bsdf": {"type": "diffuse", "reflectance": 0.5}}
+    scene = load(d)
+    scene.set_differentiable(["terrain.heights"])
+    with pytest.warns(UserWarning, match=r"rays met shapes other than the heightfield and emitters"):
+        scene.render_forward({"terrain.heights": heights_of(d)}, spp=2)
+    with pytest.raises(ValueError, match=r"shape 'box' is differentiable"):
+        scene.set_differentiable(["terrain.heights", "box.vertex_positions"])
+        scene.render_forward({}, spp=1)
