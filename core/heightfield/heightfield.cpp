@@ -45,28 +45,36 @@ HeightSample Heightfield::eval(double x, double y) const {
   return out;
 }
 
-HeightSample Heightfield::eval_slopes(double x, double y) const {
-  const PatchCoords p = patch(x, y);
+void CellPatch::load(const Heightfield& hf, int cell_i, int cell_j) {
+  i = cell_i;
+  j = cell_j;
+  for (int b = 0; b < 4; ++b) {
+    const size_t row = size_t(std::clamp(j - 1 + b, 0, hf.ny - 1)) * hf.nx;
+    for (int a = 0; a < 4; ++a) control[b][a] = hf.heights[row + std::clamp(i - 1 + a, 0, hf.nx - 1)];
+  }
+}
+
+HeightSample CellPatch::eval(const Heightfield& hf, double x, double y) const {
+  const double fc = std::clamp(hf.grid_c(x) - i, 0.0, 1.0), fr = std::clamp(hf.grid_r(y) - j, 0.0, 1.0);
   double bc[4], dbc[4], br[4], dbr[4], unused[4];
-  bspline_basis(p.fc, bc, dbc, unused);
-  bspline_basis(p.fr, br, dbr, unused);
+  bspline_basis(fc, bc, dbc, unused);
+  bspline_basis(fr, br, dbr, unused);
   double z = 0, zc = 0, zr = 0;
   for (int b = 0; b < 4; ++b) {
     double row = 0, drow = 0;
     for (int a = 0; a < 4; ++a) {
-      const double h = heights[p.index[b][a]];
-      row += bc[a] * h;
-      drow += dbc[a] * h;
+      row += bc[a] * control[b][a];
+      drow += dbc[a] * control[b][a];
     }
     z += br[b] * row;
     zc += br[b] * drow;
     zr += dbr[b] * row;
   }
-  const double s = height_scale;
+  const double s = hf.height_scale;
   HeightSample out;
   out.z = s * z;
-  out.dx = s * zc * (nx - 1) / double(width);
-  out.dy = -s * zr * (ny - 1) / double(depth);
+  out.dx = s * zc * (hf.nx - 1) / double(hf.width);
+  out.dy = -s * zr * (hf.ny - 1) / double(hf.depth);
   return out;
 }
 
@@ -213,27 +221,13 @@ bool Heightfield::intersect_local(const Vec3d& o, const Vec3d& d, double tmin, d
     }
     // Leaf: solve the cell's patch.
     if (cells) ++*cells;
-    const PatchCoords pc = patch(local_x(n.i + 0.5), local_y(n.j + 0.5));
-    double control[4][4];
-    for (int b = 0; b < 4; ++b)
-      for (int a = 0; a < 4; ++a) control[b][a] = heights[pc.index[b][a]];
-    const double kc = (nx - 1) / double(width), kr = -(ny - 1) / double(depth);  // dc/dx, dr/dy
+    CellPatch cell;
+    cell.load(*this, n.i, n.j);
     // F and dF/dt at t.
     auto F = [&](double t, double& dF) {
-      const double x = o.x + t * d.x, y = o.y + t * d.y;
-      const double fc = std::clamp(grid_c(x) - n.i, 0.0, 1.0), fr = std::clamp(grid_r(y) - n.j, 0.0, 1.0);
-      double bc[4], br[4], dbc[4], dbr[4], unused[4];
-      bspline_basis(fc, bc, dbc, unused);
-      bspline_basis(fr, br, dbr, unused);
-      double z = 0, zc = 0, zr = 0;
-      for (int b = 0; b < 4; ++b)
-        for (int a = 0; a < 4; ++a) {
-          z += br[b] * bc[a] * control[b][a];
-          zc += br[b] * dbc[a] * control[b][a];
-          zr += dbr[b] * bc[a] * control[b][a];
-        }
-      dF = d.z - height_scale * (zc * kc * d.x + zr * kr * d.y);
-      return o.z + t * d.z - height_scale * z;
+      const HeightSample h = cell.eval(*this, o.x + t * d.x, o.y + t * d.y);
+      dF = d.z - (h.dx * d.x + h.dy * d.y);
+      return o.z + t * d.z - h.z;
     };
     auto bisect = [&](double lo, double hi, double flo) {
       double unused;

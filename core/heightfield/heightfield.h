@@ -46,6 +46,18 @@ struct PatchCoords {
   int index[4][4];   // index[b][a]: flat height index of control point (row r0-1+b, column c0-1+a)
 };
 
+struct Heightfield;
+
+// One cell's 4x4 control heights, loaded once for repeated evaluations inside that cell (the ray
+// solver's and the peak search's inner loops).
+struct CellPatch {
+  int i = -1, j = -1;  // cell column, row
+  double control[4][4];
+  void load(const Heightfield& hf, int cell_i, int cell_j);
+  // Height and slopes (local units) at local (x, y), clamped into the cell.
+  HeightSample eval(const Heightfield& hf, double x, double y) const;
+};
+
 struct Heightfield {
   int nx = 0, ny = 0;              // columns, rows (>= 2 each)
   std::vector<float> heights;      // ny * nx control heights, row-major (row 0: y = +D/2)
@@ -86,8 +98,6 @@ struct Heightfield {
   bool inside(double x, double y) const { return std::abs(x) <= 0.5 * width && std::abs(y) <= 0.5 * depth; }
   PatchCoords patch(double x, double y) const;
   HeightSample eval(double x, double y) const;
-  // Height and slopes only (z, dx, dy; the curvatures are left 0): the peak search's inner loop.
-  HeightSample eval_slopes(double x, double y) const;
 
   // Nearest hit of a local-frame ray with t in (tmin, tmax) (t is the same in world space when
   // the ray direction is mapped without normalising). `cells` counts level-0 cells solved.

@@ -35,8 +35,12 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
   struct Sample {
     double t, k, dk;
   };
+  CellPatch cell;  // the cell being sampled; refinements may reach into the previous one
   auto sample_at = [&](double t) {
-    const HeightSample h = hf.eval_slopes(o.x + t * d.x, o.y + t * d.y);
+    const double x = o.x + t * d.x, y = o.y + t * d.y;
+    const double c = hf.grid_c(x), r = hf.grid_r(y);
+    const bool in_cell = c >= cell.i - 1e-9 && c <= cell.i + 1 + 1e-9 && r >= cell.j - 1e-9 && r <= cell.j + 1 + 1e-9;
+    const HeightSample h = in_cell ? cell.eval(hf, x, y) : hf.eval(x, y);
     const double k = (h.z - o.z) / t;
     return Sample{t, k, (h.dx * d.x + h.dy * d.y) - k};
   };
@@ -96,6 +100,7 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
       continue;
     }
     ++st.cells;
+    cell.load(hf, n.i, n.j);
     // Sub-steps of this cell; the cell's first point is the previous cell's last unless the run
     // was broken, and t = 0 itself (the origin) is never a sample.
     const bool continues = have_prev && std::abs(prev.t - n.t0) <= 1e-12 * std::max(1.0, n.t0);

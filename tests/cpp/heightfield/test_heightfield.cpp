@@ -66,7 +66,10 @@ TEST_CASE("heightfield: B-spline slopes and curvatures match central differences
     CHECK(s.dxx == doctest::Approx((sx1.dx - sx0.dx) / (2 * h)).epsilon(1e-4));
     CHECK(s.dyy == doctest::Approx((sy1.dy - sy0.dy) / (2 * h)).epsilon(1e-4));
     CHECK(s.dxy == doctest::Approx((sy1.dx - sy0.dx) / (2 * h)).epsilon(1e-4));
-    const HeightSample f = hf.eval_slopes(x, y);  // the peak search's lighter evaluation agrees
+    CellPatch cell;  // the inner loops' per-cell evaluation agrees
+    const PatchCoords pc = hf.patch(x, y);
+    cell.load(hf, pc.c0, pc.r0);
+    const HeightSample f = cell.eval(hf, x, y);
     CHECK(f.z == doctest::Approx(s.z).epsilon(1e-12));
     CHECK(f.dx == doctest::Approx(s.dx).epsilon(1e-12));
     CHECK(f.dy == doctest::Approx(s.dy).epsilon(1e-12));
