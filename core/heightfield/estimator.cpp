@@ -156,24 +156,30 @@ struct HeightfieldPath {
   // Samples theta in [lo, hi] for the slice at azimuth phi (Eq. 10-11): split at the peaks (and at
   // every emitter edge), choose the interval holding a uniform primal theta and map linearly
   // between its taped end points. weight = 1 / pdf(theta) with the end points' motion in it.
-  bool sample_theta(const Origin& o, const Var& phi, Var lo, Var hi, Var& theta, Var& weight) {
-    const double lo0 = lo.v, hi0 = hi.v;
-    if (!(hi0 > lo0)) return false;
-    const double u = double(rng.next_float());
-    const double th0 = lo0 + u * (hi0 - lo0);
+  // visible_only (emitter sampling, where a ray that meets the field contributes nothing): the
+  // range ends at the steepest peak, above which no ray meets the field; when the field blocks
+  // the whole range the sample is 0 without a ray. The dropped part's integral is 0 for every
+  // value of the parameters, so this only removes zero-valued samples.
+  bool sample_theta(const Origin& o, const Var& phi, Var lo, Var hi, Var& theta, Var& weight, bool visible_only = false) {
+    if (!(hi.v > lo.v)) return false;
+    double inv_p = 1.0;  // 1 / probability of the sub-range
     if (E.m_opt.theta_subrange_degrees > 0.0f) {  // App. C: search one sub-range only
-      const int n = std::max(1, int(std::ceil((hi0 - lo0) / (E.m_opt.theta_subrange_degrees * kPiD / 180.0))));
-      const int k = std::min(n - 1, int(u * n));
+      const int n = std::max(1, int(std::ceil((hi.v - lo.v) / (E.m_opt.theta_subrange_degrees * kPiD / 180.0))));
+      const int k = std::min(n - 1, int(double(rng.next_float()) * n));
       const Var a = lo + (hi - lo) * Var(double(k) / n), b = lo + (hi - lo) * Var(double(k + 1) / n);
       lo = a;
       hi = b;
+      inv_p = n;
     }
-    std::vector<Split> splits{{lo.v, lo}, {hi.v, hi}};
     // Peaks with theta in (lo, hi): slopes in (cot hi, cot lo).
     const glm::dvec2 d(std::cos(phi.v), std::sin(phi.v));
     ++cnt.searches;
-    const std::vector<SlicePeak> peaks = find_peaks(hf(), o.p0, d, slope_of(hi.v), slope_of(lo.v), E.m_opt.search, &cnt.search);
+    bool blocked = false;
+    const std::vector<SlicePeak> peaks =
+        find_peaks(hf(), o.p0, d, slope_of(hi.v), slope_of(lo.v), E.m_opt.search, &cnt.search, &blocked);
+    if (visible_only && blocked) return false;
     const Var dx = cos(phi), dy = sin(phi);
+    std::vector<Split> splits;
     for (const SlicePeak& p : peaks) {
       // The peak at fixed horizontal distance: k is stationary in t there (Eq. 12), so its
       // derivative is the partial at fixed t. Border points are fixed in t by the footprint.
@@ -182,28 +188,29 @@ struct HeightfieldPath {
       const Var th = atan2(Var(p.t), z - o.p.z);
       splits.push_back({th.v, th});
     }
+    if (visible_only && !splits.empty() && splits.back().v < hi.v) hi = splits.back().var;  // the steepest peak
+    if (!(hi.v > lo.v)) return false;
     std::vector<std::array<VV, 3>> tris;
-    std::vector<Split> cross;
     for (const auto& et : E.m_area_emitters) {
       emitter_triangles(et, tris);
-      crossings(o, phi, tris, cross);
+      crossings(o, phi, tris, splits);
     }
-    for (const Split& s : cross) splits.push_back(s);
-    // Keep the splits inside (lo, hi), sorted by primal value.
-    std::vector<Split> cut{splits[0]};
-    std::sort(splits.begin() + 2, splits.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
-    for (size_t i = 2; i < splits.size(); ++i)
-      if (splits[i].v > lo.v && splits[i].v < hi.v) cut.push_back(splits[i]);
-    cut.push_back(splits[1]);
+    // The intervals of (lo, hi), end points sorted by primal value.
+    std::vector<Split> cut{{lo.v, lo}};
+    std::sort(splits.begin(), splits.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
+    for (const Split& s : splits)
+      if (s.v > lo.v && s.v < hi.v) cut.push_back(s);
+    cut.push_back({hi.v, hi});
     if (!E.m_opt.reparameterize)
       for (Split& c : cut) c.var = Var(c.v);
+    const double th0 = lo.v + double(rng.next_float()) * (hi.v - lo.v);
     size_t j = 0;
     while (j + 2 < cut.size() && th0 >= cut[j + 1].v) ++j;
     const double w0 = cut[j + 1].v - cut[j].v;
     if (!(w0 > 0.0)) return false;
     const Var width = cut[j + 1].var - cut[j].var;
     theta = cut[j].var + width * Var((th0 - cut[j].v) / w0);
-    weight = Var(hi0 - lo0) * width / Var(w0);
+    weight = Var(inv_p * (hi.v - lo.v)) * width / Var(w0);
     return true;
   }
 
@@ -275,10 +282,7 @@ struct HeightfieldPath {
     if (lo.v >= h.v) return VV();  // the emitter is below the tangent plane here
     if (hi.v > h.v) hi = Split{h.v, h};  // nothing is reflected below it (and the integrand is 0 there)
     Var theta, w_theta;
-    if (!sample_theta(o, phi, lo.var, hi.var, theta, w_theta)) {
-      ++cnt.empty_ranges;
-      return VV();
-    }
+    if (!sample_theta(o, phi, lo.var, hi.var, theta, w_theta, true)) return VV();  // the field hides the emitter here
     const VV w = world_direction(phi, theta);
     const Vec3 w0(float(w.x.v), float(w.y.v), float(w.z.v));
     SurfaceInteraction e;

@@ -13,8 +13,9 @@ struct Node {
 }  // namespace
 
 std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_start, double k_stop,
-                                  const PeakSearchOptions& opt, PeakSearchStats* stats) {
+                                  const PeakSearchOptions& opt, PeakSearchStats* stats, bool* blocked) {
   std::vector<SlicePeak> peaks;
+  if (blocked) *blocked = false;
   PeakSearchStats local_stats;
   PeakSearchStats& st = stats ? *stats : local_stats;
   // The part of the slice over the footprint.
@@ -110,6 +111,7 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
       add_sample(sample_at(t));
     }
   }
+  if (blocked) *blocked = k_run >= k_stop;
   // The far edge is a silhouette when the slope still rises there.
   if (k_run < k_stop && last_is_record && std::abs(last_t - t_out) <= 1e-9 * std::max(1.0, t_out))
     peaks.push_back({t_out, prev.k, true});

@@ -31,7 +31,11 @@ struct PeakSearchOptions {
 // Peaks with k in (k_start, k_stop), in order of increasing t (and so of increasing k). k_start is
 // the running maximum at t = 0: the slope of the tangent plane when o is on the surface (below it
 // the surface hides everything), or the lowest slope of interest otherwise.
+// The last peak has the largest slope of the whole slice: rays steeper than it leave the field
+// without meeting it. `blocked` (optional) is set when some point reaches k_stop: then every ray
+// of the range meets the field (the search stops there).
 std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_start, double k_stop,
-                                  const PeakSearchOptions& options = {}, PeakSearchStats* stats = nullptr);
+                                  const PeakSearchOptions& options = {}, PeakSearchStats* stats = nullptr,
+                                  bool* blocked = nullptr);
 
 }  // namespace limn

@@ -126,3 +126,30 @@ TEST_CASE("peak search: a flat field has no peaks but its far edge; an origin ou
   CHECK(peaks[0].t == doctest::Approx(2.0));
   CHECK(peaks[1].t == doctest::Approx(4.0));
 }
+
+TEST_CASE("peak search: rays steeper than the last peak leave the field; 'blocked' means none does") {
+  const Heightfield hf = terrain(49, 12);
+  Pcg32 rng(21);
+  int escaped = 0, blocked_count = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const double x = (rng.next_float() - 0.5) * 1.6, y = (rng.next_float() - 0.5) * 1.6;
+    const HeightSample h = hf.eval(x, y);
+    const Vec3d o(x, y, h.z + 1e-6);
+    const double phi = 6.283185307 * rng.next_float();
+    const glm::dvec2 d(std::cos(phi), std::sin(phi));
+    const double k0 = h.dx * d.x + h.dy * d.y, k_stop = k0 + 0.4 * rng.next_float();
+    bool blocked = false;
+    const auto peaks = find_peaks(hf, o, d, k0, k_stop, {}, nullptr, &blocked);
+    double t;
+    if (blocked) {
+      ++blocked_count;  // even the steepest ray of the range meets the field
+      CHECK(hf.intersect_local(o, glm::normalize(Vec3d(d.x, d.y, k_stop - 1e-4)), 1e-5, 10.0, t));
+    } else {
+      const double k_top = peaks.empty() ? k0 : peaks.back().k;
+      CHECK_FALSE(hf.intersect_local(o, glm::normalize(Vec3d(d.x, d.y, k_top + 1e-4)), 1e-5, 10.0, t));
+      ++escaped;
+    }
+  }
+  CHECK(escaped > 20);
+  CHECK(blocked_count > 20);
+}
