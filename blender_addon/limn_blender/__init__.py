@@ -92,6 +92,7 @@ class LIMN_PT_render(bpy.types.Panel):
             row = box.row()
             row.prop(t, "camera", text="")
             row.prop(t, "image", text="")
+            row.prop(t, "light_collection", text="", icon="LIGHT")  # empty: all lights
         box.operator(optimize_ops.LIMN_OT_target_add.bl_idname, icon="ADD")
         box.prop(s, "iterations")
         box.prop(s, "learning_rate")

@@ -304,12 +304,22 @@ def _export_world(scene, desc, warnings):
         desc["world"] = {"type": "constant", "radiance": radiance}
 
 
+def light_objects(collection) -> list:
+    """The light objects (type LIGHT) of a Blender collection and of its child collections."""
+    return [o for o in collection.all_objects if o.type == "LIGHT"]
+
+
 def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | None = None,
-                 heightfields=()) -> tuple[dict, list[str]]:
+                 heightfields=(), light_collection=None) -> tuple[dict, list[str]]:
     """Returns (scene description for limn.load_dict, warnings). Mesh objects named in
     `heightfields`, and those whose property limn_heightfield is set, are exported as limn
-    heightfields (a ValueError names the object when that is impossible)."""
+    heightfields (a ValueError names the object when that is impossible).
+
+    `light_collection` (a bpy Collection, or None for all lights) is a light set-up: only the
+    light objects (type LIGHT) in it or in its child collections are exported. The rule covers
+    light objects only: meshes with emissive materials and the world are exported either way."""
     heightfields = set(heightfields or ())
+    allowed_lights = None if light_collection is None else {o.as_pointer() for o in light_objects(light_collection)}
     scene = scene or bpy.context.scene
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     warnings: list[str] = []
@@ -332,6 +342,8 @@ def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | Non
         elif obj.type in MESH_TYPES:
             _export_mesh_object(obj, world, desc, warnings, used_ids)
         elif obj.type == "LIGHT":
+            if allowed_lights is not None and original.as_pointer() not in allowed_lights:
+                continue  # not in this view's light set-up
             _export_light(obj, world, desc, warnings, used_ids)
     _export_world(scene, desc, warnings)
     return desc, warnings

@@ -3,6 +3,12 @@ given cameras match target images, then write the vertices back (one undo step).
 
 Script use (also headless):
     limn_blender.optimize(obj, [(camera, image_or_path), ...], iterations=50)
+A target may also name a light set-up, a Blender collection: (camera, image, collection). Only the
+light objects (type LIGHT) in that collection (or its child collections) light that target's
+render; with no collection (None, or a pair) every light of the scene does. Meshes with emissive
+materials and the world light every target. So one camera can have several targets, e.g. the same
+field under a morning and an evening light:
+    limn_blender.optimize(obj, [(cam, morning_img, morning), (cam, evening_img, evening)])
 In the UI (Properties > Render > limn > Optimise) the loop runs on a worker thread (the C++ calls
 release the GIL); a timer shows progress and the loss, writes the mesh back every few iterations
 and at the end, and Esc cancels, keeping the last state. In background mode the operator runs the
@@ -44,6 +50,38 @@ def _target_pixels(target, width: int, height: int, limn) -> np.ndarray:
 MODES = ("AUTO", "MESH", "HEIGHTFIELD")
 
 
+def _unpack_target(i: int, entry):
+    """(camera, image, light collection or None) from a target entry: (camera, image) or
+    (camera, image, collection)."""
+    try:
+        items = tuple(entry)
+    except TypeError:
+        items = ()
+    if len(items) not in (2, 3):
+        raise ValueError(f"target {i + 1}: give (camera, image) or (camera, image, light collection), got {entry!r}")
+    cam, image = items[:2]
+    lights = items[2] if len(items) == 3 else None
+    if lights is not None and not isinstance(lights, bpy.types.Collection):
+        raise ValueError(f"target {i + 1}: the light set-up must be a Blender collection or None "
+                         f"(got {type(lights).__name__})")
+    return cam, image, lights
+
+
+def _check_light_setup(i: int, cam, image, lights) -> None:
+    """A chosen light collection must hold at least one light object that renders."""
+    if lights is None:
+        return
+    found = exporter.light_objects(lights)
+    if any(not o.hide_render for o in found):
+        return
+    what = f"target {i + 1} (camera '{getattr(cam, 'name', cam)}', image '{getattr(image, 'name', image)}')"
+    if found:
+        raise ValueError(f"{what}: the lights of light collection '{lights.name}' "
+                         f"({', '.join(o.name for o in found)}) are all disabled in renders")
+    raise ValueError(f"{what}: light collection '{lights.name}' holds no light objects; add lights to it "
+                     "or clear the field to use all lights of the scene")
+
+
 def resolve_mode(obj, mode: str) -> str:
     """Returns "MESH" or "HEIGHTFIELD" for the object and the chosen mode ("AUTO", "MESH", "HEIGHTFIELD")."""
     if mode not in MODES:
@@ -64,6 +102,9 @@ class Problem:
             raise ValueError("choose a mesh object to optimise")
         if not targets:
             raise ValueError("give at least one (camera, target image) pair")
+        targets = [_unpack_target(i, t) for i, t in enumerate(targets)]
+        for i, (cam, image, lights) in enumerate(targets):
+            _check_light_setup(i, cam, image, lights)
         self.mode = resolve_mode(obj, mode)
         if self.mode == "MESH" and getattr(obj, "limn_heightfield", False):
             raise ValueError(f"object '{obj.name}' is marked as a limn heightfield; choose the heightfield mode or "
@@ -80,15 +121,17 @@ class Problem:
         saved_camera = scene.camera
         self.views = []
         try:
-            for cam, target in targets:
+            for cam, target, lights in targets:
                 if cam is None or cam.type != "CAMERA":
                     raise ValueError(f"'{getattr(cam, 'name', cam)}' is not a camera")
                 scene.camera = cam
-                desc, _ = exporter.export_scene(scene, spp=spp, heightfields={obj.name} if self.source else ())
+                desc, _ = exporter.export_scene(scene, spp=spp, heightfields={obj.name} if self.source else (),
+                                                light_collection=lights)
                 if obj.name not in desc:
                     raise ValueError(f"object '{obj.name}' was not exported as one shape (hidden, or several materials?)")
                 shape = desc[obj.name]
-                lscene = self.limn.load_dict(desc, source=f"blender '{scene.name}' camera '{cam.name}'")
+                lit = f" lights '{lights.name}'" if lights is not None else ""
+                lscene = self.limn.load_dict(desc, source=f"blender '{scene.name}' camera '{cam.name}'{lit}")
                 r = scene.render
                 w, h = int(r.resolution_x * r.resolution_percentage / 100), int(r.resolution_y * r.resolution_percentage / 100)
                 self.views.append((lscene, _target_pixels(target, w, h, self.limn)))
@@ -197,10 +240,15 @@ class OptimizeJob:
 class LimnTarget(bpy.types.PropertyGroup):
     camera: bpy.props.PointerProperty(name="Camera", type=bpy.types.Object, poll=lambda self, o: o.type == "CAMERA")
     image: bpy.props.PointerProperty(name="Target", type=bpy.types.Image)
+    light_collection: bpy.props.PointerProperty(
+        name="Lights", type=bpy.types.Collection,
+        description="Light set-up of this target: only the light objects in this collection (and its child "
+                    "collections) light its render; empty: all lights of the scene. Emissive meshes and the world "
+                    "light every target")
 
 
 class LIMN_OT_target_add(bpy.types.Operator):
-    """Add a (camera, target image) pair"""
+    """Add a target: camera, target image and an optional light collection"""
     bl_idname = "limn.target_add"
     bl_label = "Add target"
 
@@ -226,7 +274,7 @@ class LIMN_OT_optimize(bpy.types.Operator):
 
     def _inputs(self, context):
         s = context.scene.limn
-        targets = [(t.camera, t.image) for t in s.targets if t.camera is not None and t.image is not None]
+        targets = [(t.camera, t.image, t.light_collection) for t in s.targets if t.camera is not None and t.image is not None]
         return s, targets
 
     def execute(self, context):
