@@ -112,15 +112,21 @@ struct HeightfieldPath {
     return F.to_world_vector(VV(st * cos(phi), st * sin(phi), cos(theta))) / F.scale;
   }
 
-  // Emitter triangles in the local frame (taped vertices).
-  void emitter_triangles(const HeightfieldEstimator::EmitterTriangles& et, std::vector<std::array<VV, 3>>& out) const {
+  // Emitter k's triangles in the local frame (taped vertices), built once per path: every slice
+  // of the path splits at their edges.
+  std::vector<std::vector<std::array<VV, 3>>> emitter_tris;
+  const std::vector<std::array<VV, 3>>& emitter_triangles(size_t k) {
+    if (emitter_tris.empty()) emitter_tris.resize(E.m_area_emitters.size());
+    std::vector<std::array<VV, 3>>& out = emitter_tris[k];
+    const auto& et = E.m_area_emitters[k];
+    if (!out.empty() || et.prims.empty()) return out;
     const Mesh& m = scene.shapes[et.shape].mesh();
-    out.clear();
     for (int f : et.prims) {
       std::array<VV, 3> t;
       for (int c = 0; c < 3; ++c) t[c] = F.to_local_point(diff_vertex(scene, E.m_params, in, et.shape, m.indices[3 * f + c]));
       out.push_back(t);
     }
+    return out;
   }
 
   // Thetas where the half-plane at azimuth phi from o crosses the edges of the triangles.
@@ -190,11 +196,7 @@ struct HeightfieldPath {
     }
     if (visible_only && !splits.empty() && splits.back().v < hi.v) hi = splits.back().var;  // the steepest peak
     if (!(hi.v > lo.v)) return false;
-    std::vector<std::array<VV, 3>> tris;
-    for (const auto& et : E.m_area_emitters) {
-      emitter_triangles(et, tris);
-      crossings(o, phi, tris, splits);
-    }
+    for (size_t k = 0; k < E.m_area_emitters.size(); ++k) crossings(o, phi, emitter_triangles(k), splits);
     // The intervals of (lo, hi), end points sorted by primal value.
     std::vector<Split> cut{{lo.v, lo}};
     std::sort(splits.begin(), splits.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
@@ -235,8 +237,7 @@ struct HeightfieldPath {
     const float u_phi = rng.next_float();
     const auto& et = E.m_area_emitters[k];
     const Origin o = origin(x.p);
-    std::vector<std::array<VV, 3>> tris;
-    emitter_triangles(et, tris);
+    const std::vector<std::array<VV, 3>>& tris = emitter_triangles(k);
     // Azimuth range: the angular hull of the vertices, or everything when the emitter is right
     // above or below the origin (or wraps around it).
     bool full = false;
@@ -369,6 +370,7 @@ struct HeightfieldPath {
 
   // Pixel (px, py) with a box filter: the pixel's cone turned into (phi, theta-range) (App. A.1).
   VV pixel(int px, int py) {
+    if (E.m_max_depth == 0) return VV();
     const Camera& cam = scene.camera;
     const Vec3 eye = cam.world_from_camera.point(Vec3(0.0f));
     const Origin o = origin(constant(eye));
@@ -435,9 +437,8 @@ struct HeightfieldPath {
     const DiffVertex x = R.ray_hit(constant(eye), w, si, ray);
     VV L;
     const Shape& shape = scene.shapes[si.shape];
-    if (shape.emitter >= 0 && glm::dot(si.ng, w0) < 0.0f && !cfg.hide_emitters && E.m_max_depth != 0)
+    if (shape.emitter >= 0 && glm::dot(si.ng, w0) < 0.0f && !cfg.hide_emitters)
       L = beta * R.emitter_value(shape.emitter, std::get<AreaEmitter>(scene.emitters[shape.emitter].model).radiance);
-    if (E.m_max_depth == 0) return VV();
     return L + continue_path(x, si, -w, beta, 0);
   }
 };

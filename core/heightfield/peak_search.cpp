@@ -22,14 +22,6 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
   double t_in = 0.0, t_out = 1e30;
   const int top = int(hf.mip.size()) - 1;
   if (!hf.node_span(top, 0, 0, o.x, o.y, d.x, d.y, t_in, t_out)) return peaks;
-  auto k_at = [&](double t) { return (hf.eval(o.x + t * d.x, o.y + t * d.y).z - o.z) / t; };
-
-  double k_run = k_start;
-  if (t_in > 0.0) {  // the origin is outside the footprint: the near edge hides what passes under it
-    const double k = k_at(t_in);
-    if (k > k_run && k < k_stop) peaks.push_back({t_in, k, true});
-    k_run = std::max(k_run, k);
-  }
   // Slope samples along the slice with the sign of dk/dt = (z'(t) - k) / t: a maximum lies between
   // consecutive samples where it turns from rising to falling, also right after a skipped node
   // (everything inside that node is under the running maximum, so no record is lost there).
@@ -40,11 +32,17 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
   auto sample_at = [&](double t) {
     const double x = o.x + t * d.x, y = o.y + t * d.y;
     const double c = hf.grid_c(x), r = hf.grid_r(y);
-    const bool in_cell = c >= cell.i - 1e-9 && c <= cell.i + 1 + 1e-9 && r >= cell.j - 1e-9 && r <= cell.j + 1 + 1e-9;
+    const bool in_cell = cell.i >= 0 && c >= cell.i - 1e-9 && c <= cell.i + 1 + 1e-9 && r >= cell.j - 1e-9 && r <= cell.j + 1 + 1e-9;
     const HeightSample h = in_cell ? cell.eval(hf, x, y) : hf.eval(x, y);
     const double k = (h.z - o.z) / t;
     return Sample{t, k, (h.dx * d.x + h.dy * d.y) - k};
   };
+  double k_run = k_start;
+  if (t_in > 0.0) {  // the origin is outside the footprint: the near edge hides what passes under it
+    const double k = sample_at(t_in).k;
+    if (k > k_run && k < k_stop) peaks.push_back({t_in, k, true});
+    k_run = std::max(k_run, k);
+  }
   Sample prev{0, -1e300, 0};
   bool have_prev = false, last_is_record = false;
   double last_t = -1.0;

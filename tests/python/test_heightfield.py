@@ -16,6 +16,7 @@ import limn
 import limn.shapes
 from conftest import SCENES
 from test_derivatives import block_z
+from test_indirect_boundary import quiet
 
 HERE = os.path.join(SCENES, "heightfield")
 
@@ -27,12 +28,6 @@ def scene_dict(name):
 
 def load(d):
     return limn.load_dict(d, base_dir=HERE)
-
-
-def quiet(fn, *args, **kw):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return fn(*args, **kw)
 
 
 def heights_of(d):
