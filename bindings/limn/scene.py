@@ -118,7 +118,7 @@ class Scene:
 
     # Derivative options and their defaults (render_forward / render_backward keyword arguments).
     DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "guiding_spp": 4,
-                    "guiding_seeds": 32,
+                    "guiding_seeds": None,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
                     "heightfield_mipmap": True, "heightfield_reparam": True, "theta_subrange": 0.0, "max_depth": None, "threads": 0}
@@ -142,9 +142,13 @@ class Scene:
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
-        for name in ("grid_resolution", "guiding_spp", "guiding_seeds", "octree_slices", "octree_leaf_samples"):
+        for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples"):
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
+        if opts["guiding_seeds"] is None:
+            opts["guiding_seeds"] = 0  # the guide's default (32 for the grid, 256 for the octree)
+        elif int(opts["guiding_seeds"]) < 1:
+            raise ValueError(f"guiding_seeds must be >= 1 or None (got {opts['guiding_seeds']})")
         if not (0.0 <= float(opts["theta_subrange"]) < 180.0):
             raise ValueError(f"theta_subrange must be in [0, 180) degrees (got {opts['theta_subrange']})")
         self.update()
@@ -183,7 +187,8 @@ class Scene:
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose
           segments (``project_seed``: ``"bsdf"``, ``"emitter"`` or ``"both"``) are projected onto
-          silhouettes.
+          silhouettes; None: 32 for the grid, 256 for the octree (the octree splits only at
+          projections where the integrand is non-zero, a few per cent of them).
         - ``guide_refresh`` k > 0 keeps the guide in ``Scene.guide_cache`` and reuses it for up to k
           calls while the settings are the same and no moving geometry moved by more than
           ``guide_refresh_threshold`` of its bounding-box diagonal (optimisation loops); 0 builds

@@ -50,8 +50,8 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
   if (opt.guiding != "none" && opt.guiding != "grid" && opt.guiding != "octree")
     throw std::invalid_argument(scene.source + ": guiding must be 'none', 'grid' or 'octree' (got '" + opt.guiding + "')");
   parse_seed_segments(opt.project_seed, scene.source);
-  if (opt.guiding_spp < 1 || opt.guiding_seeds < 1)
-    throw std::invalid_argument(scene.source + ": guiding_spp and guiding_seeds must be >= 1");
+  if (opt.guiding_spp < 1 || opt.guiding_seeds < 0)
+    throw std::invalid_argument(scene.source + ": guiding_spp must be >= 1 and guiding_seeds >= 0 (0: the guide's default)");
   if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
 }
 
@@ -233,7 +233,7 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
   }
   const Projector projector(scene, ib.space());
   SeedStats st;
-  const uint64_t paths = uint64_t(opt.guiding_seeds) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+  const uint64_t paths = uint64_t(seeds_per_pixel(opt)) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
   const std::vector<Projection> seeds =
       projected_seeds(scene, projector, paths, parse_seed_segments(opt.project_seed, scene.source), max_depth, opt.seed, opt.threads, &st);
   std::vector<Vec3> points(seeds.size());
@@ -281,7 +281,7 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
   GuideCache* cache = opt.guide_refresh > 0 ? opt.guide_cache : nullptr;
   const std::string key = opt.guiding + "|" + (opt.projective ? "p" : "u") + "|" + opt.project_seed + "|" +
                           std::to_string(opt.grid_resolution) + "|" + std::to_string(opt.guiding_spp) + "|" +
-                          std::to_string(opt.guiding_seeds) + "|" +
+                          std::to_string(seeds_per_pixel(opt)) + "|" +
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
                           std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "|" +
                           std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);

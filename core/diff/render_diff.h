@@ -35,6 +35,12 @@ struct GuideCache {
   uint64_t builds = 0, reuses = 0;
 };
 
+// Default seed paths per pixel of the projective guides (docs/reports/projective/README.md): the
+// grid accumulates every projection's value and is good from few seeds; the octree only splits at
+// projections of non-zero value (about 4 % of them in the paper's test scene), so it needs more.
+constexpr int kGridSeeds = 32;
+constexpr int kOctreeSeeds = 256;
+
 struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
   int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
@@ -44,7 +50,8 @@ struct DiffOptions {
   std::string project_seed = "both";  // seed segments from "bsdf", "emitter" or "both" (core/diff/seeding.h)
   int grid_resolution = 64;      // grid cells along the first axis; (R/4, R/2) along the direction axes
   int guiding_spp = 4;           // baseline grid: random points per cell
-  int guiding_seeds = 32;        // projective guides: seed paths per pixel
+  // Projective guides: seed paths per pixel; 0 picks the guide's default (kGridSeeds, kOctreeSeeds).
+  int guiding_seeds = 0;
   OctreeOptions octree;
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
   int guide_refresh = 0;              // rebuild after this many calls (0: every call)
@@ -55,6 +62,10 @@ struct DiffOptions {
   int threads = 0;
   std::function<bool(float)> progress;
 };
+inline int seeds_per_pixel(const DiffOptions& o) {
+  return o.guiding_seeds > 0 ? o.guiding_seeds : o.guiding == "octree" ? kOctreeSeeds : kGridSeeds;
+}
+
 
 struct DiffStats {
   double seconds = 0.0;

@@ -31,7 +31,12 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   for (size_t i = 0; i < points.size(); ++i) {
     const Vec3& p = points[i];
     if (!(p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f && p.z >= 0.0f && p.z < 1.0f)) continue;
+    // Projections where the integrand is zero (a silhouette no path observes) mark no feature:
+    // they would only split empty space (section 5.1.2 builds on "samples concentrated at the
+    // sparse features"; Mitsuba's prb_projective keeps points of non-zero mass likewise).
+    if (!values.empty() && !(std::isfinite(values[i]) && values[i] > 0.0f)) continue;
     by_slice[size_t(std::min(int(p.x * S), S - 1))].push_back(uint32_t(i));
+    ++m_splitting;
   }
   for (int s = 0; s < S; ++s) queue.push_back({s, 0, Vec3(float(s) / S, 0.0f, 0.0f), Vec3(1.0f / S, 1.0f, 1.0f), std::move(by_slice[size_t(s)])});
   size_t leaves = size_t(S);
@@ -87,7 +92,7 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
         }
         if (!values.empty())
           for (uint32_t i : leaf_points[l]) {
-            if (std::isfinite(values[i]) && values[i] > 0.0f) sum += values[i];
+            sum += values[i];
             ++count;
           }
         mass[l] = sum / count * double(leaf.size.x) * leaf.size.y * leaf.size.z;
@@ -163,7 +168,8 @@ size_t BoundaryOctree::memory_bytes() const {
 }
 
 std::string BoundaryOctree::describe() const {
-  return "octree " + std::to_string(m_opt.slices) + " slices, " + std::to_string(m_leaves.size()) + " leaves (" +
+  return "octree " + std::to_string(m_opt.slices) + " slices split at " + std::to_string(m_splitting) + " projections of non-zero value, " +
+         std::to_string(m_leaves.size()) + " leaves (" +
          std::to_string(m_empty) + " empty), depth <= " + std::to_string(m_opt.max_depth) + ", " +
          std::to_string(m_opt.leaf_samples) + " uniform samples per leaf" +
          (m_coarsened ? ", COARSENED at the leaf budget (max_leaves " + std::to_string(m_opt.max_leaves) + ")" : "");

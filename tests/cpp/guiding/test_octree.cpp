@@ -2,6 +2,8 @@
 // (chi-square), the defensive component reaches every region, and the leaf budget coarsens.
 #include <doctest/doctest.h>
 
+#include <limits>
+
 #include "core/guiding/grid.h"
 #include "core/guiding/octree.h"
 #include "core/math/rng.h"
@@ -109,6 +111,31 @@ TEST_CASE("octree guiding: a leaf budget coarsens instead of dropping anything")
   CHECK(empty.leaf_count() == 8);
   CHECK(mean_pdf(empty, rng, 100000) == doctest::Approx(1.0).epsilon(0.03));
   CHECK_THROWS_AS(BoundaryOctree(pts, OctreeOptions{0, 9, 32, 1u << 20, 0.1f}, 1, 0, sparse), std::invalid_argument);
+}
+
+TEST_CASE("octree guiding: projections where the integrand is zero do not split") {
+  // Seeds that land on silhouettes no path observes (value 0) would only refine empty space.
+  Pcg32 rng(11);
+  const auto features = projected_points(2000, rng);
+  std::vector<Vec3> all = features;
+  std::vector<float> values;
+  for (const Vec3& p : features) values.push_back(sparse(p));
+  for (int i = 0; i < 2000; ++i) {
+    all.push_back(Vec3(rng.next_float(), rng.next_float(), rng.next_float()));
+    values.push_back(0.0f);
+  }
+  values.push_back(std::numeric_limits<float>::quiet_NaN());  // and no non-finite value either
+  all.push_back(Vec3(0.5f));
+  OctreeOptions opt;
+  opt.slices = 16;
+  opt.max_depth = 7;
+  opt.leaf_samples = 4;
+  const BoundaryOctree mixed(all, opt, 5, 0, sparse, values);
+  const BoundaryOctree clean(features, opt, 5, 0, sparse, std::vector<float>(values.begin(), values.begin() + 2000));
+  const BoundaryOctree unfiltered(all, opt, 5, 0, sparse);  // no values: every point splits
+  CHECK(mixed.leaf_count() == clean.leaf_count());
+  CHECK(2 * unfiltered.leaf_count() > 3 * clean.leaf_count());  // 2000 uniform points add ~7000 leaves
+  CHECK(mean_pdf(mixed, rng, 200000) == doctest::Approx(1.0).epsilon(0.03));
 }
 
 TEST_CASE("projective grid: values at projected points fill the cells") {
