@@ -171,7 +171,7 @@ std::optional<Projection> Projector::project_sphere(const Vec3& xa, const Surfac
   return finish(segment, xa, sp.center + sp.radius * nb, true, glm::normalize(xa - hit.p));
 }
 
-int Projector::walk(int shape, const Vec3& xa, int& f, int steps, Pcg32& rng, int& taken) const {
+int Projector::walk(int shape, const Vec3& xa, const Vec3& near, int& f, int steps, Pcg32& rng, int& taken) const {
   const Mesh& m = m_scene.shapes[shape].mesh();
   const MeshTopology& t = m_meshes.at(shape);
   int previous = -1;  // not straight back: on bumps two triangles can otherwise trade places forever
@@ -180,21 +180,27 @@ int Projector::walk(int shape, const Vec3& xa, int& f, int steps, Pcg32& rng, in
     // silhouette) onto a back-facing triangle, the crest beside it is the silhouette to find.
     const double s0 = facing(m, f, xa) >= 0.0 ? 1.0 : -1.0;
     // A silhouette edge of f: the face across looks the other way, or an open edge in the space.
+    // When f has several (a corner of a flat-shaded box), the one nearest to the hit: taking the
+    // first in index order sent every hit on a face to the same edge.
     double score[3];
+    int found = -1;
+    float found_dist = kInfinity;
     for (int k = 0; k < 3; ++k) {
       const int g = t.neighbour[3 * size_t(f) + k], seg = t.segment[3 * size_t(f) + k];
+      const Vec3 a = m.vertex(m.indices[3 * size_t(f) + k]), b = m.vertex(m.indices[3 * size_t(f) + (k + 1) % 3]);
+      float lambda;
+      if (seg >= 0 && (g < 0 || silhouette_parameter(m, f, g, a, b, xa, 0.5f) >= 0.0f)) {  // open edge, or the exact test along it
+        const float dist = glm::length(closest_on_segment(a, b, near, lambda) - near);
+        if (dist < found_dist) found = seg, found_dist = dist;
+      }
       if (g < 0) {
-        if (seg >= 0) return seg;
         score[k] = -1.0;
         continue;
       }
       const double c = s0 * facing(m, g, xa);
-      if (seg >= 0) {  // the exact test somewhere along the shared edge
-        const Vec3 a = m.vertex(m.indices[3 * size_t(f) + k]), b = m.vertex(m.indices[3 * size_t(f) + (k + 1) % 3]);
-        if (silhouette_parameter(m, f, g, a, b, xa, 0.5f) >= 0.0f) return seg;
-      }
       score[k] = g == previous ? 0.0 : std::acos(std::clamp(c, -1.0, 1.0));  // the angle to increase towards 90 degrees
     }
+    if (found >= 0) return found;
     // Between the two best neighbours, in proportion to their angles.
     int order[3] = {0, 1, 2};
     std::sort(order, order + 3, [&](int a, int b) { return score[a] > score[b]; });
@@ -272,7 +278,7 @@ std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceI
   int f = hit.prim, taken = 0;
   Vec3 p = hit.p;
   int seg = -1;
-  if (m_mode != MeshProjection::Jump) seg = walk(hit.shape, xa, f, kWalkSteps, rng, taken);
+  if (m_mode != MeshProjection::Jump) seg = walk(hit.shape, xa, hit.p, f, kWalkSteps, rng, taken);
   if (seg < 0 && m_mode != MeshProjection::Walk) {
     if (m_mode == MeshProjection::Hybrid && taken > 0) {  // jump from where the walk stopped
       const uint32_t* i = &m_scene.shapes[hit.shape].mesh().indices[3 * size_t(f)];
@@ -280,7 +286,7 @@ std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceI
       p = (m.vertex(i[0]) + m.vertex(i[1]) + m.vertex(i[2])) / 3.0f;
     }
     if (jump(hit.shape, xa, f, p))
-      seg = walk(hit.shape, xa, f, m_mode == MeshProjection::Jump ? 1 : kWalkSteps, rng, taken);
+      seg = walk(hit.shape, xa, p, f, m_mode == MeshProjection::Jump ? 1 : kWalkSteps, rng, taken);
   }
   std::optional<Projection> r;
   if (seg >= 0) r = finish(seg, xa, hit.p, true, glm::normalize(xa - hit.p));

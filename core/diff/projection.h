@@ -39,8 +39,9 @@ class Projector {
  private:
   std::optional<Projection> project_sphere(const Vec3& xa, const SurfaceInteraction& hit) const;
   std::optional<Projection> project_mesh(const Vec3& xa, const SurfaceInteraction& hit, Pcg32& rng) const;
-  // Greedy walk from triangle f; returns the silhouette edge's segment, or -1 (f is updated).
-  int walk(int shape, const Vec3& xa, int& f, int steps, Pcg32& rng, int& taken) const;
+  // Greedy walk from triangle f; returns the silhouette edge's segment nearest to `near` among
+  // those of the first triangle that has any, or -1 (f is updated).
+  int walk(int shape, const Vec3& xa, const Vec3& near, int& f, int steps, Pcg32& rng, int& taken) const;
   // One JUMP from point p on triangle f; lands on triangle f (updated) at p (updated).
   bool jump(int shape, const Vec3& xa, int& f, Vec3& p) const;
   // The boundary point on `segment` nearest to `near`, with the original segment direction w_orig
