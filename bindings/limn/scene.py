@@ -145,7 +145,7 @@ class Scene:
         for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples"):
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
-        if opts["guiding_seeds"] is None:
+        if opts["guiding_seeds"] is None:  # C++ reads 0 as "the guide's default"; an explicit 0 is refused
             opts["guiding_seeds"] = 0  # the guide's default (32 for the grid, 256 for the octree)
         elif int(opts["guiding_seeds"]) < 1:
             raise ValueError(f"guiding_seeds must be >= 1 or None (got {opts['guiding_seeds']})")

@@ -188,10 +188,12 @@ int Projector::walk(int shape, const Vec3& xa, const Vec3& near, int& f, int ste
     for (int k = 0; k < 3; ++k) {
       const int g = t.neighbour[3 * size_t(f) + k], seg = t.segment[3 * size_t(f) + k];
       const Vec3 a = m.vertex(m.indices[3 * size_t(f) + k]), b = m.vertex(m.indices[3 * size_t(f) + (k + 1) % 3]);
-      float lambda;
-      if (seg >= 0 && (g < 0 || silhouette_parameter(m, f, g, a, b, xa, 0.5f) >= 0.0f)) {  // open edge, or the exact test along it
-        const float dist = glm::length(closest_on_segment(a, b, near, lambda) - near);
-        if (dist < found_dist) found = seg, found_dist = dist;
+      if (seg >= 0) {  // an open edge, or the exact test along it (ranked by its silhouette point nearest to `near`)
+        float lambda;
+        closest_on_segment(a, b, near, lambda);
+        if (g >= 0) lambda = silhouette_parameter(m, f, g, a, b, xa, lambda);
+        const float dist = lambda >= 0.0f ? glm::length(a + lambda * (b - a) - near) : kInfinity;
+        if (found < 0 ? lambda >= 0.0f : dist < found_dist) found = seg, found_dist = dist;
       }
       if (g < 0) {
         score[k] = -1.0;
@@ -276,7 +278,7 @@ std::optional<Projection> Projector::snap(int shape, int f, const Vec3& xa, cons
 
 std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceInteraction& hit, Pcg32& rng) const {
   int f = hit.prim, taken = 0;
-  Vec3 p = hit.p;
+  Vec3 p = hit.p, near = hit.p;  // near: where the walk that found the silhouette started
   int seg = -1;
   if (m_mode != MeshProjection::Jump) seg = walk(hit.shape, xa, hit.p, f, kWalkSteps, rng, taken);
   if (seg < 0 && m_mode != MeshProjection::Walk) {
@@ -285,11 +287,13 @@ std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceI
       const Mesh& m = m_scene.shapes[hit.shape].mesh();
       p = (m.vertex(i[0]) + m.vertex(i[1]) + m.vertex(i[2])) / 3.0f;
     }
-    if (jump(hit.shape, xa, f, p))
+    if (jump(hit.shape, xa, f, p)) {
+      near = p;
       seg = walk(hit.shape, xa, p, f, m_mode == MeshProjection::Jump ? 1 : kWalkSteps, rng, taken);
+    }
   }
   std::optional<Projection> r;
-  if (seg >= 0) r = finish(seg, xa, hit.p, true, glm::normalize(xa - hit.p));
+  if (seg >= 0) r = finish(seg, xa, near, true, glm::normalize(xa - hit.p));
   return r ? r : snap(hit.shape, f, xa, p);
 }
 

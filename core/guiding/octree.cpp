@@ -12,10 +12,12 @@ namespace limn {
 
 BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& opt, uint64_t seed, int threads,
                                const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values)
-    : m_opt(opt) {
+    : m_opt(opt), m_valued(!values.empty()) {
   if (opt.slices < 1 || opt.slices > 1 << 16) throw std::invalid_argument("octree guiding: slices must be in [1, 65536] (got " + std::to_string(opt.slices) + ")");
   if (opt.max_depth < 0 || opt.max_depth > 12) throw std::invalid_argument("octree guiding: max_depth must be in [0, 12] (got " + std::to_string(opt.max_depth) + ")");
   if (opt.leaf_samples < 1) throw std::invalid_argument("octree guiding: leaf_samples must be >= 1 (got " + std::to_string(opt.leaf_samples) + ")");
+  if (!values.empty() && values.size() != points.size())
+    throw std::invalid_argument("octree guiding: " + std::to_string(values.size()) + " values for " + std::to_string(points.size()) + " points");
   if (opt.max_leaves < size_t(opt.slices)) throw std::invalid_argument("octree guiding: max_leaves must be >= slices");
 
   // Bottom-up partition, breadth first so that a leaf budget coarsens evenly.
@@ -168,8 +170,8 @@ size_t BoundaryOctree::memory_bytes() const {
 }
 
 std::string BoundaryOctree::describe() const {
-  return "octree " + std::to_string(m_opt.slices) + " slices split at " + std::to_string(m_splitting) + " projections of non-zero value, " +
-         std::to_string(m_leaves.size()) + " leaves (" +
+  return "octree " + std::to_string(m_opt.slices) + " slices split at " + std::to_string(m_splitting) +
+         (m_valued ? " projections of non-zero value, " : " points, ") + std::to_string(m_leaves.size()) + " leaves (" +
          std::to_string(m_empty) + " empty), depth <= " + std::to_string(m_opt.max_depth) + ", " +
          std::to_string(m_opt.leaf_samples) + " uniform samples per leaf" +
          (m_coarsened ? ", COARSENED at the leaf budget (max_leaves " + std::to_string(m_opt.max_leaves) + ")" : "");

@@ -2,7 +2,8 @@
 // sample space is pre-split into `slices` equal slabs (heterogeneity across edges, shapes and
 // their concatenation); each slab is an octree built bottom-up from projected samples, splitting a
 // node 8 ways while it holds more than one sample and is shallower than `max_depth` (given
-// `values`, only samples where the integrand is non-zero count: the others mark no feature). Every leaf's
+// `values`, only samples whose one-sample integrand estimate is non-zero count: the others mark no
+// feature, and a feature point estimated at zero is still covered by the leaf masses). Every leaf's
 // mass is then estimated from `leaf_samples` uniform points inside it (no projections needed),
 // together with the integrand at the projected points the leaf holds (`values`, optional: a leaf
 // narrower than its feature would otherwise often miss it with a few uniform points), and leaves
@@ -64,6 +65,7 @@ class BoundaryOctree : public BoundaryGuide {
   std::vector<float> m_first;      // density of the first coordinate on a fine regular grid
   size_t m_empty = 0;
   size_t m_splitting = 0;  // points that took part in the partition
+  bool m_valued = false;   // built with values (only non-zero ones split)
   bool m_coarsened = false;
 };
 

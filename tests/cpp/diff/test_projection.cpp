@@ -160,33 +160,36 @@ TEST_CASE("projection: on a box corner with two silhouette edges, hits go to the
             "faces": [[0,2,1],[0,3,2],[4,5,6],[4,6,7],[0,1,5],[0,5,4],[1,2,6],[1,6,5],[2,3,7],[2,7,6],[3,0,4],[3,4,7]]})");
   const DiffParams params(*scene, {"box.vertex_positions"});
   const BoundarySpace space(*scene, params);
-  const Projector proj(*scene, space, MeshProjection::Walk);
   const Mesh& m = scene->shapes[0].mesh();
-  const Vec3 xa(-1.5f, -2.0f, -1.0f);
-  auto edge_of = [&](const Projection& p) {
-    const BoundarySegment& s = space.segments()[size_t(p.segment)];
-    const Vec3 a = m.vertex(s.a), b = m.vertex(s.b);
-    if (a.x == -0.5f && b.x == -0.5f && a.y == 0.5f && b.y == 0.5f) return std::string("back-left");
-    if (a.x == -0.5f && b.x == -0.5f && a.z == 1.7f && b.z == 1.7f) return std::string("top-left");
-    return std::string("other");
-  };
-  Pcg32 rng(5);
-  int back = 0, top = 0, tried = 0;
-  for (int i = 0; i < 400; ++i) {
-    const bool near_back = i % 2 == 0;
-    // Points on the left face (x = -0.5) within 0.05 of the back edge (y = 0.5) or of the top edge (z = 1.7).
-    const float along = rng.next_float(), off = 0.05f * rng.next_float();
-    const Vec3 target = near_back ? Vec3(-0.5f, 0.5f - off, 0.75f + 0.9f * along) : Vec3(-0.5f, -0.45f + 0.9f * along, 1.7f - off);
-    SurfaceInteraction hit;
-    REQUIRE(scene->intersect(Ray{xa, glm::normalize(target - xa), 0.0f, kInfinity}, hit));
-    REQUIRE(std::abs(hit.p.x + 0.5f) < 1e-4f);
-    const auto p = proj.project(xa, hit, rng);
-    REQUIRE(p);
-    REQUIRE(p->found);
-    ++tried;
-    back += near_back && edge_of(*p) == "back-left";
-    top += !near_back && edge_of(*p) == "top-left";
+  for (const MeshProjection mode : {MeshProjection::Walk, MeshProjection::Hybrid}) {
+    CAPTURE(int(mode));
+    const Projector proj(*scene, space, mode);
+    const Vec3 xa(-1.5f, -2.0f, -1.0f);
+    auto edge_of = [&](const Projection& p) {
+      const BoundarySegment& s = space.segments()[size_t(p.segment)];
+      const Vec3 a = m.vertex(s.a), b = m.vertex(s.b);
+      if (a.x == -0.5f && b.x == -0.5f && a.y == 0.5f && b.y == 0.5f) return std::string("back-left");
+      if (a.x == -0.5f && b.x == -0.5f && a.z == 1.7f && b.z == 1.7f) return std::string("top-left");
+      return std::string("other");
+    };
+    Pcg32 rng(5);
+    int back = 0, top = 0, tried = 0;
+    for (int i = 0; i < 400; ++i) {
+      const bool near_back = i % 2 == 0;
+      // Points on the left face (x = -0.5) within 0.05 of the back edge (y = 0.5) or of the top edge (z = 1.7).
+      const float along = rng.next_float(), off = 0.05f * rng.next_float();
+      const Vec3 target = near_back ? Vec3(-0.5f, 0.5f - off, 0.75f + 0.9f * along) : Vec3(-0.5f, -0.45f + 0.9f * along, 1.7f - off);
+      SurfaceInteraction hit;
+      REQUIRE(scene->intersect(Ray{xa, glm::normalize(target - xa), 0.0f, kInfinity}, hit));
+      REQUIRE(std::abs(hit.p.x + 0.5f) < 1e-4f);
+      const auto p = proj.project(xa, hit, rng);
+      REQUIRE(p);
+      REQUIRE(p->found);
+      ++tried;
+      back += near_back && edge_of(*p) == "back-left";
+      top += !near_back && edge_of(*p) == "top-left";
+    }
+    CHECK(back == tried / 2);
+    CHECK(top == tried / 2);
   }
-  CHECK(back == tried / 2);
-  CHECK(top == tried / 2);
 }

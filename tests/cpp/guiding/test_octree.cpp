@@ -124,14 +124,17 @@ TEST_CASE("octree guiding: projections where the integrand is zero do not split"
     all.push_back(Vec3(rng.next_float(), rng.next_float(), rng.next_float()));
     values.push_back(0.0f);
   }
-  values.push_back(std::numeric_limits<float>::quiet_NaN());  // and no non-finite value either
-  all.push_back(Vec3(0.5f));
+  for (const float x : {0.52f, 0.53f}) {  // and no non-finite value either (two, so that they would split)
+    values.push_back(std::numeric_limits<float>::quiet_NaN());
+    all.push_back(Vec3(x, 0.5f, 0.5f));
+  }
   OctreeOptions opt;
   opt.slices = 16;
   opt.max_depth = 7;
   opt.leaf_samples = 4;
   const BoundaryOctree mixed(all, opt, 5, 0, sparse, values);
   const BoundaryOctree clean(features, opt, 5, 0, sparse, std::vector<float>(values.begin(), values.begin() + 2000));
+  CHECK_THROWS_AS(BoundaryOctree(all, opt, 5, 0, sparse, std::vector<float>(10, 1.0f)), std::invalid_argument);
   const BoundaryOctree unfiltered(all, opt, 5, 0, sparse);  // no values: every point splits
   CHECK(mixed.leaf_count() == clean.leaf_count());
   CHECK(2 * unfiltered.leaf_count() > 3 * clean.leaf_count());  // 2000 uniform points add ~7000 leaves
