@@ -10,6 +10,19 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 SCENES = os.path.join(ROOT, "scenes")
 
 
+def scene_json(folder: str, name: str) -> dict:
+    """<folder>/<name>.json as a dict."""
+    import json
+    with open(os.path.join(folder, name + ".json")) as f:
+        return json.load(f)
+
+
+def load_in(folder: str, d: dict):
+    """A scene dict whose files (meshes, images) are relative to `folder`."""
+    import limn
+    return limn.load_dict(d, base_dir=folder)
+
+
 def camera(origin, target, up=(0, 0, 1), fov=40.0, width=32, height=32, spp=16):
     return {"type": "perspective", "fov": fov,
             "to_world": {"look_at": {"origin": list(origin), "target": list(target), "up": list(up)}},

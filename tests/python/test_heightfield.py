@@ -14,7 +14,7 @@ import pytest
 
 import limn
 import limn.shapes
-from conftest import SCENES
+from conftest import SCENES, load_in, scene_json
 from test_derivatives import block_z
 from test_indirect_boundary import quiet
 
@@ -22,12 +22,11 @@ HERE = os.path.join(SCENES, "heightfield")
 
 
 def scene_dict(name):
-    with open(os.path.join(HERE, name + ".json")) as f:
-        return json.load(f)
+    return scene_json(HERE, name)
 
 
 def load(d):
-    return limn.load_dict(d, base_dir=HERE)
+    return load_in(HERE, d)
 
 
 def heights_of(d):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import limn
-from conftest import SCENES
+from conftest import SCENES, load_in, scene_json
 from test_derivatives import block_z
 
 VALIDATION = os.path.join(SCENES, "validation")
@@ -18,12 +18,11 @@ VALIDATION = os.path.join(SCENES, "validation")
 
 def validation(name):
     """scenes/validation/<name>.json as a dict (README.md there lists the cases)."""
-    with open(os.path.join(VALIDATION, name + ".json")) as f:
-        return json.load(f)
+    return scene_json(VALIDATION, name)
 
 
 def load(d):
-    return limn.load_dict(d, base_dir=VALIDATION)
+    return load_in(VALIDATION, d)
 
 
 def quiet(fn, *args, **kw):
