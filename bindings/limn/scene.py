@@ -120,6 +120,7 @@ class Scene:
     DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "guiding_spp": 4,
                     "guiding_seeds": None,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
+                    "octree_grid_mix": 0.5,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
                     "heightfield_mipmap": True, "heightfield_reparam": True, "theta_subrange": 0.0, "max_depth": None, "threads": 0}
 
@@ -149,6 +150,8 @@ class Scene:
             opts["guiding_seeds"] = 0  # the guide's default (32 for the grid, 256 for the octree)
         elif int(opts["guiding_seeds"]) < 1:
             raise ValueError(f"guiding_seeds must be >= 1 or None (got {opts['guiding_seeds']})")
+        if not (0.0 <= float(opts["octree_grid_mix"]) < 1.0):
+            raise ValueError(f"octree_grid_mix must be in [0, 1) (got {opts['octree_grid_mix']})")
         if not (0.0 <= float(opts["theta_subrange"]) < 180.0):
             raise ValueError(f"theta_subrange must be in [0, 180) degrees (got {opts['theta_subrange']})")
         self.update()
@@ -182,7 +185,12 @@ class Scene:
           uniform grid of ``grid_resolution`` cells along the first axis (and R/4 x R/2 over the
           others); ``"octree"`` an adaptive octree (``octree_slices`` slabs along the first axis,
           depth <= ``octree_max_depth``, ``octree_leaf_samples`` uniform samples per leaf, at most
-          ``octree_max_leaves`` leaves: beyond that it coarsens and the summary says so).
+          ``octree_max_leaves`` leaves: beyond that it coarsens and the summary says so), sampled
+          in a mixture with the projective grid built from the same projections
+          (``octree_grid_mix``, its share, default 0.5; 0: the octree alone). The grid covers the
+          parts of a narrow feature next to the points that were found, which the octree's leaves
+          there estimate as empty; without it the octree's errors are heavy-tailed (see
+          docs/reports/projective/README.md).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose

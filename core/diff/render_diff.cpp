@@ -13,6 +13,7 @@
 #include "core/diff/primary.h"
 #include "core/diff/seeding.h"
 #include "core/guiding/grid.h"
+#include "core/guiding/mixture.h"
 
 namespace limn {
 namespace {
@@ -50,6 +51,8 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
   if (opt.guiding != "none" && opt.guiding != "grid" && opt.guiding != "octree")
     throw std::invalid_argument(scene.source + ": guiding must be 'none', 'grid' or 'octree' (got '" + opt.guiding + "')");
   parse_seed_segments(opt.project_seed, scene.source);
+  if (!(opt.octree_grid_mix >= 0.0f && opt.octree_grid_mix < 1.0f))
+    throw std::invalid_argument(scene.source + ": octree_grid_mix must be in [0, 1) (got " + std::to_string(opt.octree_grid_mix) + ")");
   if (opt.guiding_spp < 1 || opt.guiding_seeds < 0)
     throw std::invalid_argument(scene.source + ": guiding_spp must be >= 1 and guiding_seeds >= 0 (0: the guide's default)");
   if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
@@ -217,7 +220,7 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 
 // The guiding distribution of the indirect term for this call: the path-space baseline grid
 // (random points per cell), or projected seeds into a grid (their integrand values) or an octree
-// (their positions; leaf masses from uniform samples).
+// (their positions; leaf masses from uniform samples), by default mixed with the projective grid.
 void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptions& opt, int max_depth, BoundaryTerms& terms) {
   auto integrand = [&](const Vec3& u) {
     uint32_t bits[3];
@@ -248,8 +251,15 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
       for (size_t i = r.begin(); i != r.end(); ++i) values[i] = integrand(points[i]);
     });
   });
-  if (opt.guiding == "grid") terms.guide = std::make_shared<BoundaryGrid>(res, points, values);
-  else terms.guide = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values);
+  if (opt.guiding == "grid") {
+    terms.guide = std::make_shared<BoundaryGrid>(res, points, values);
+    return;
+  }
+  auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values);
+  if (opt.octree_grid_mix > 0.0f)
+    terms.guide = std::make_shared<GuideMixture>(octree, std::make_shared<BoundaryGrid>(res, points, values), opt.octree_grid_mix);
+  else
+    terms.guide = octree;
 }
 
 // The moving geometry's values and bounding-box diagonal (what decides whether a guide is stale).

@@ -53,6 +53,9 @@ struct DiffOptions {
   // Projective guides: seed paths per pixel; 0 picks the guide's default (kGridSeeds, kOctreeSeeds).
   int guiding_seeds = 0;
   OctreeOptions octree;
+  // Octree guiding: the share of the projective grid, filled from the same projections, in the
+  // sampling mixture (core/guiding/mixture.h); 0 samples the octree alone.
+  float octree_grid_mix = 0.5f;
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
   int guide_refresh = 0;              // rebuild after this many calls (0: every call)
   float guide_refresh_threshold = 0.02f;

@@ -89,6 +89,18 @@ Vec3 BoundaryGrid::sample(const Vec3& u, float* pdf) const {
   return p;
 }
 
+Box BoundaryGrid::region_box(size_t c) const {
+  const int i0 = int(c / (size_t(m_res[1]) * m_res[2])), i1 = int((c / m_res[2]) % m_res[1]), i2 = int(c % m_res[2]);
+  const Vec3 size(1.0f / m_res[0], 1.0f / m_res[1], 1.0f / m_res[2]);
+  return {Vec3(float(i0), float(i1), float(i2)) * size, size};
+}
+
+double BoundaryGrid::box_probability(const Box& box) const {
+  double total = 0.0;
+  for (size_t c = 0; c < m_mass.size(); ++c) total += m_cells.pmf(c) * overlap_fraction(region_box(c), box);
+  return total;
+}
+
 float BoundaryGrid::pdf(const Vec3& p) const { return m_cells.pmf(cell_of(p)) * float(m_mass.size()); }
 
 float BoundaryGrid::pdf_first(float p0) const {

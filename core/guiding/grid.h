@@ -29,6 +29,8 @@ class BoundaryGrid : public BoundaryGuide {
   size_t region_count() const override { return m_mass.size(); }
   size_t region_of(const Vec3& p) const override { return cell_of(p); }
   double region_probability(size_t c) const override { return m_cells.pmf(c); }
+  Box region_box(size_t c) const override;
+  double box_probability(const Box& box) const override;
 
   size_t cell_count() const { return m_mass.size(); }
   size_t empty_cells() const { return m_empty; }

@@ -2,11 +2,28 @@
 // section 5.1): a mixture with a defensive uniform component, so that every region keeps a
 // non-zero density and the boundary estimate stays unbiased wherever the integrand is non-zero.
 #pragma once
+#include <algorithm>
 #include <cstddef>
 #include <string>
 #include "core/math/vec.h"
 
 namespace limn {
+
+// An axis-aligned box of [0,1)^3: its low corner and its size.
+struct Box {
+  Vec3 lo, size;
+};
+
+// The fraction of `region`'s volume that lies inside `box`.
+inline double overlap_fraction(const Box& region, const Box& box) {
+  double f = 1.0;
+  for (int a = 0; a < 3; ++a) {
+    const double lo = std::max(region.lo[a], box.lo[a]), hi = std::min(region.lo[a] + region.size[a], box.lo[a] + box.size[a]);
+    if (!(hi > lo)) return 0.0;
+    f *= (hi - lo) / region.size[a];
+  }
+  return f;
+}
 
 class BoundaryGuide {
  public:
@@ -22,6 +39,10 @@ class BoundaryGuide {
   virtual size_t region_count() const = 0;
   virtual size_t region_of(const Vec3& p) const = 0;
   virtual double region_probability(size_t region) const = 0;
+  virtual Box region_box(size_t region) const = 0;
+  // The probability of a box (exact: the density is piecewise constant); O(regions), for tests
+  // and mixtures' region probabilities, not for render loops.
+  virtual double box_probability(const Box& box) const = 0;
   // One line for the run's summary: cells or leaves, empty ones, coarsening.
   virtual std::string describe() const = 0;
 };

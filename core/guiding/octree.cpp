@@ -159,6 +159,12 @@ float BoundaryOctree::pdf(const Vec3& p) const {
   return m_select.pmf(size_t(l)) / (leaf.size.x * leaf.size.y * leaf.size.z);
 }
 
+double BoundaryOctree::box_probability(const Box& box) const {
+  double total = 0.0;
+  for (size_t l = 0; l < m_leaves.size(); ++l) total += m_select.pmf(l) * overlap_fraction(region_box(l), box);
+  return total;
+}
+
 float BoundaryOctree::pdf_first(float p0) const {
   const size_t b = std::min(m_first.size() - 1, size_t(std::max(p0, 0.0f) * m_first.size()));
   return m_first[b];

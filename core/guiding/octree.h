@@ -42,6 +42,8 @@ class BoundaryOctree : public BoundaryGuide {
   size_t region_count() const override { return m_leaves.size(); }
   size_t region_of(const Vec3& p) const override { return size_t(leaf_at(p)); }
   double region_probability(size_t l) const override { return m_select.pmf(l); }
+  Box region_box(size_t l) const override { return {m_leaves[l].lo, m_leaves[l].size}; }
+  double box_probability(const Box& box) const override;
 
   size_t leaf_count() const { return m_leaves.size(); }
   size_t empty_leaves() const { return m_empty; }

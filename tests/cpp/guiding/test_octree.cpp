@@ -1,10 +1,11 @@
-// Octree and projective-grid guiding: densities integrate to 1, sampling frequencies match them
-// (chi-square), the defensive component reaches every region, and the leaf budget coarsens.
+// Octree, projective-grid and mixed guiding: densities integrate to 1, sampling frequencies match
+// them (chi-square), the defensive component reaches every region, and the leaf budget coarsens.
 #include <doctest/doctest.h>
 
 #include <limits>
 
 #include "core/guiding/grid.h"
+#include "core/guiding/mixture.h"
 #include "core/guiding/octree.h"
 #include "core/math/rng.h"
 
@@ -152,4 +153,46 @@ TEST_CASE("projective grid: values at projected points fill the cells") {
   CHECK(chi < q);
   CHECK(grid.empty_cells() > grid.cell_count() / 2);
   CHECK(grid.describe().find("projective grid") == 0);
+}
+
+TEST_CASE("octree mixed with the projective grid: a normalised mixture that covers what the points missed") {
+  // Projections found only the lower fifth (y < 0.1) of the thin slab, all of the ball: the
+  // octree's leaves over the rest of the slab see it with 4 uniform points each, the grid's coarse
+  // cells cover it from the points found next to it.
+  Pcg32 rng(12);
+  std::vector<Vec3> pts;
+  for (const Vec3& p : projected_points(6000, rng))
+    if (p.x > 0.5f || p.y < 0.1f) pts.push_back(p);
+  std::vector<float> values;
+  for (const Vec3& p : pts) values.push_back(sparse(p));
+  OctreeOptions opt;
+  opt.slices = 16;
+  opt.max_depth = 7;
+  opt.leaf_samples = 4;
+  auto octree = std::make_shared<BoundaryOctree>(pts, opt, 5, 0, sparse, values);
+  auto grid = std::make_shared<BoundaryGrid>(std::array<int, 3>{16, 4, 8}, pts, values);
+  const GuideMixture mix(octree, grid, 0.5f);
+  CHECK(mean_pdf(mix, rng, 400000) == doctest::Approx(1.0).epsilon(0.03));
+  double first = 0.0;
+  for (int i = 0; i < 200000; ++i) first += mix.pdf_first(rng.next_float());
+  CHECK(first / 200000 == doctest::Approx(1.0).epsilon(0.02));
+  const Box all{Vec3(0.0f), Vec3(1.0f)};
+  CHECK(octree->box_probability(all) == doctest::Approx(1.0).epsilon(1e-5));
+  CHECK(grid->box_probability(all) == doctest::Approx(1.0).epsilon(1e-5));
+  CHECK(mix.box_probability(all) == doctest::Approx(1.0).epsilon(1e-5));
+  const auto [chi, q] = chi_square(mix, 200000, rng);
+  CHECK(chi < q);
+  CHECK(mix.describe().find("mixed 50 % with the projective grid") != std::string::npos);
+  // The largest weight f / pdf on the part of the slab that no point reached (y in 0.1..0.25, the
+  // grid cell row holding the found ones): the octree leaves it at the defensive 0.1 (weight 400), the
+  // mixture at a tenth of that or less.
+  double worst_octree = 0.0, worst_mix = 0.0;
+  for (int i = 0; i < 20000; ++i) {
+    const Vec3 p(0.31f + 0.0079f * (rng.next_float() - 0.5f), 0.1f + 0.15f * rng.next_float(), rng.next_float());
+    worst_octree = std::max(worst_octree, double(sparse(p) / octree->pdf(p)));
+    worst_mix = std::max(worst_mix, double(sparse(p) / mix.pdf(p)));
+  }
+  CHECK(worst_mix * 10.0 < worst_octree);
+  CHECK_THROWS_AS(GuideMixture(octree, grid, 1.0f), std::invalid_argument);
+  CHECK_THROWS_AS(GuideMixture(octree, nullptr, 0.5f), std::invalid_argument);
 }
