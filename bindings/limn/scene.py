@@ -122,7 +122,8 @@ class Scene:
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
                     "octree_grid_mix": 0.5,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
-                    "heightfield_mipmap": True, "heightfield_reparam": True, "theta_subrange": 0.0, "max_depth": None, "threads": 0}
+                    "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
+                    "theta_subrange": 0.0, "max_depth": None, "threads": 0}
 
     def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
         if not self._differentiable:
@@ -207,7 +208,9 @@ class Scene:
         Scenes with a ``heightfield`` shape and differentiable geometry use the heightfield estimator
         (Tong et al. 2023) instead of all three terms (``spp_interior`` paths per pixel; the boundary
         sample counts and guiding options do not apply): ``heightfield_mipmap=False`` searches
-        discontinuities without the maximum mipmap (brute force, for comparison) and
+        discontinuities without the maximum mipmap (brute force, for comparison),
+        ``heightfield_curvature_test=False`` skips mipmap nodes by their maximum height only (not
+        also by the second-derivative bound, core/heightfield/peak_search.h; for comparison), and
         ``theta_subrange`` > 0 searches only a sub-range of that many degrees per sample (App. C);
         ``heightfield_reparam=False`` holds the split points fixed, which drops the visibility part
         of the derivative (a diagnostic, like ``spp_boundary=0``).

@@ -103,6 +103,7 @@ DiffOptions diff_options(const py::dict& options) {
     else if (k == "guide_refresh") o.guide_refresh = value.cast<int>();
     else if (k == "guide_refresh_threshold") o.guide_refresh_threshold = value.cast<float>();
     else if (k == "heightfield_mipmap") o.heightfield.search.use_mipmap = value.cast<bool>();
+    else if (k == "heightfield_curvature_test") o.heightfield.search.curvature_test = value.cast<bool>();
     else if (k == "heightfield_reparam") o.heightfield.reparameterize = value.cast<bool>();
     else if (k == "theta_subrange") o.heightfield.theta_subrange_degrees = value.cast<float>();
     else throw std::invalid_argument("unknown derivative option '" + k + "'");

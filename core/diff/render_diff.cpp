@@ -172,7 +172,11 @@ std::vector<std::string> summarize_heightfield(const Scene& scene, int spp, cons
               std::to_string(hf.heightfield().ny) + " heights): " + std::to_string(spp) +
               " paths per pixel, theta reparameterised at the discontinuities of each azimuth slice; " +
               std::to_string(c.searches) + " peak searches visited " + std::to_string(c.search.nodes) + " mipmap nodes and " +
-              std::to_string(c.search.cells) + " cells" + (opt.heightfield.search.use_mipmap ? "" : " (brute force: no mipmap skipping)") +
+              std::to_string(c.search.cells) + " cells" +
+              (!opt.heightfield.search.use_mipmap       ? " (brute force: no mipmap skipping)"
+               : opt.heightfield.search.curvature_test ? " (curvature tests: " + std::to_string(c.search.curvature_hidden) + " nodes hidden, " +
+                                                             std::to_string(c.search.curvature_rising) + " rising)"
+                                                       : " (maximum test only)") +
               (opt.heightfield.theta_subrange_degrees > 0.0f
                    ? ", theta searched in sub-ranges of " + std::to_string(opt.heightfield.theta_subrange_degrees) + " degrees (App. C)"
                    : std::string()));

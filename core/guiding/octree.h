@@ -7,7 +7,8 @@
 // mass is then estimated from `leaf_samples` uniform points inside it (no projections needed),
 // together with the integrand at the projected points the leaf holds (`values`, optional: a leaf
 // narrower than its feature would otherwise often miss it with a few uniform points), and leaves
-// are sampled in proportion to it, mixed with a defensive uniform component.
+// are sampled in proportion to it, mixed with a defensive uniform component. Renders sample it
+// in a GuideMixture with the projective grid (core/guiding/mixture.h, DiffOptions::octree_grid_mix).
 //
 // Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
 // (coarsened(), said in the summary), never dropping samples or the boundary term.

@@ -13,6 +13,8 @@ void HeightfieldCounters::add(const HeightfieldCounters& o) {
   searches += o.searches;
   search.nodes += o.search.nodes;
   search.cells += o.search.cells;
+  search.curvature_hidden += o.search.curvature_hidden;
+  search.curvature_rising += o.search.curvature_rising;
   other_shape_hits += o.other_shape_hits;
   delta_light_samples += o.delta_light_samples;
   empty_ranges += o.empty_ranges;

@@ -80,19 +80,29 @@ HeightSample CellPatch::eval(const Heightfield& hf, double x, double y) const {
 
 // ---- maximum mipmap ---------------------------------------------------------------------------------
 namespace {
-void cell_bounds(const Heightfield& hf, int c0, int r0, float& lo, float& hi) {
-  lo = kInfinity;
-  hi = -kInfinity;
-  for (int b = -1; b <= 2; ++b) {
-    const int r = std::clamp(r0 + b, 0, hf.ny - 1);
-    for (int a = -1; a <= 2; ++a) {
-      const float h = hf.heights[size_t(r) * hf.nx + std::clamp(c0 + a, 0, hf.nx - 1)];
-      lo = std::min(lo, h);
-      hi = std::max(hi, h);
-    }
+void cell_bounds(const Heightfield& hf, int c0, int r0, Heightfield::Level& L) {
+  double H[4][4];
+  for (int b = 0; b < 4; ++b) {
+    const int r = std::clamp(r0 - 1 + b, 0, hf.ny - 1);
+    for (int a = 0; a < 4; ++a) H[b][a] = hf.heights[size_t(r) * hf.nx + std::clamp(c0 - 1 + a, 0, hf.nx - 1)];
   }
-  lo *= hf.height_scale;
-  hi *= hf.height_scale;
+  double lo = H[0][0], hi = H[0][0], cc = 0.0, rr = 0.0, cr = 0.0;
+  for (int b = 0; b < 4; ++b)
+    for (int a = 0; a < 4; ++a) {
+      lo = std::min(lo, H[b][a]);
+      hi = std::max(hi, H[b][a]);
+      if (a < 2) cc = std::max(cc, std::abs(H[b][a] - 2.0 * H[b][a + 1] + H[b][a + 2]));
+      if (b < 2) rr = std::max(rr, std::abs(H[b][a] - 2.0 * H[b + 1][a] + H[b + 2][a]));
+      if (a < 3 && b < 3) cr = std::max(cr, std::abs(H[b + 1][a + 1] - H[b][a + 1] - H[b + 1][a] + H[b][a]));
+    }
+  const double s = hf.height_scale, sx = (hf.nx - 1) / double(hf.width), sy = (hf.ny - 1) / double(hf.depth);
+  const size_t k = size_t(r0) * L.w + c0;
+  L.lo[k] = float(lo) * hf.height_scale;
+  L.hi[k] = float(hi) * hf.height_scale;
+  // Rounded up by a float ulp or so, so that the bound stays a bound after the conversion.
+  L.zxx[k] = float(s * cc * sx * sx * (1.0 + 1e-6));
+  L.zyy[k] = float(s * rr * sy * sy * (1.0 + 1e-6));
+  L.zxy[k] = float(s * cr * sx * sy * (1.0 + 1e-6));
 }
 
 // Recomputes cells [x0, x1] x [y0, y1] of level l from level l - 1.
@@ -101,23 +111,31 @@ void reduce(Heightfield& hf, int l, int x0, int x1, int y0, int y1) {
   Heightfield::Level& dst = hf.mip[l];
   for (int j = y0; j <= y1; ++j)
     for (int i = x0; i <= x1; ++i) {
-      float lo = kInfinity, hi = -kInfinity;
+      float lo = kInfinity, hi = -kInfinity, xx = 0.0f, yy = 0.0f, xy = 0.0f;
       for (int b = 0; b < 2; ++b)
         for (int a = 0; a < 2; ++a) {
           const int si = 2 * i + a, sj = 2 * j + b;
           if (si >= src.w || sj >= src.h) continue;
-          lo = std::min(lo, src.lo[size_t(sj) * src.w + si]);
-          hi = std::max(hi, src.hi[size_t(sj) * src.w + si]);
+          const size_t k = size_t(sj) * src.w + si;
+          lo = std::min(lo, src.lo[k]);
+          hi = std::max(hi, src.hi[k]);
+          xx = std::max(xx, src.zxx[k]);
+          yy = std::max(yy, src.zyy[k]);
+          xy = std::max(xy, src.zxy[k]);
         }
-      dst.lo[size_t(j) * dst.w + i] = lo;
-      dst.hi[size_t(j) * dst.w + i] = hi;
+      const size_t k = size_t(j) * dst.w + i;
+      dst.lo[k] = lo;
+      dst.hi[k] = hi;
+      dst.zxx[k] = xx;
+      dst.zyy[k] = yy;
+      dst.zxy[k] = xy;
     }
 }
 
 void rebuild_region(Heightfield& hf, int x0, int x1, int y0, int y1) {
   Heightfield::Level& base = hf.mip[0];
   for (int j = y0; j <= y1; ++j)
-    for (int i = x0; i <= x1; ++i) cell_bounds(hf, i, j, base.lo[size_t(j) * base.w + i], base.hi[size_t(j) * base.w + i]);
+    for (int i = x0; i <= x1; ++i) cell_bounds(hf, i, j, base);
   for (size_t l = 1; l < hf.mip.size(); ++l) {
     x0 /= 2; x1 /= 2; y0 /= 2; y1 /= 2;
     reduce(hf, int(l), x0, x1, y0, y1);
@@ -128,11 +146,15 @@ void rebuild_region(Heightfield& hf, int x0, int x1, int y0, int y1) {
 void Heightfield::build_mipmap() {
   mip.clear();
   int w = cells_x(), h = cells_y();
-  mip.push_back({w, h, std::vector<float>(size_t(w) * h), std::vector<float>(size_t(w) * h)});
+  auto level = [](int w, int h) {
+    const std::vector<float> v(size_t(w) * h);
+    return Level{w, h, v, v, v, v, v};
+  };
+  mip.push_back(level(w, h));
   while (w > 1 || h > 1) {
     w = (w + 1) / 2;
     h = (h + 1) / 2;
-    mip.push_back({w, h, std::vector<float>(size_t(w) * h), std::vector<float>(size_t(w) * h)});
+    mip.push_back(level(w, h));
   }
   rebuild_region(*this, 0, cells_x() - 1, 0, cells_y() - 1);
   mip_heights = heights;

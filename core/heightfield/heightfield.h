@@ -69,9 +69,13 @@ struct Heightfield {
   // Maximum (and minimum) mipmap over the patches: level 0 holds, per cell, the extreme control
   // heights of its 4x4 support (the convex-hull property of B-splines bounds the surface by them),
   // level l the extremes of 2x2 cells of level l-1.
+  // Each node also bounds the surface's second derivatives (local units) over its cells, from
+  // the second differences of the control heights (B-spline derivatives are convex combinations
+  // of them): the peak search's curvature test (peak_search.cpp).
   struct Level {
     int w, h;
     std::vector<float> hi, lo;  // local z (height_scale applied)
+    std::vector<float> zxx, zyy, zxy;  // bounds on |d2z/dx2|, |d2z/dy2|, |d2z/dxdy|
   };
   std::vector<Level> mip;
   std::vector<float> mip_heights;  // the heights the mipmap was built from (what update_mipmap diffs against)

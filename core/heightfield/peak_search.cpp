@@ -68,6 +68,32 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
   // Slack for the skip test: bounds are floats, heights are evaluated in double.
   const double eps = 1e-6 * std::max(1.0, std::max(std::abs(double(hf.max_height())), std::abs(double(hf.min_height()))));
   const int n_sub = std::max(1, opt.samples_per_cell);
+  // Curvature tests (peak_search.h): C bounds the second derivative along d over the node
+  // (|d| = 1, so dx^2 + dy^2 + 2 |dx dy| weighs the three bounds); both use z and z' at t0.
+  const double adx2 = d.x * d.x, ady2 = d.y * d.y, adxy = 2.0 * std::abs(d.x * d.y);
+  enum class Shape { unknown, hidden, rising };
+  auto classify = [&](const Node& n, const Heightfield::Level& L, size_t k) {
+    if (!(n.t0 > 0.0)) return Shape::unknown;  // the origin's own node: k is not defined at t0
+    const double C = L.zxx[k] * adx2 + L.zyy[k] * ady2 + L.zxy[k] * adxy;
+    const HeightSample h = hf.eval(o.x + n.t0 * d.x, o.y + n.t0 * d.y);
+    const double dt = n.t1 - n.t0, slope = h.dx * d.x + h.dy * d.y, rise = h.z - o.z;
+    // eps as for the maximum test, plus the rounding of the bounds' own terms.
+    const double slack = eps + 1e-9 * (std::abs(rise) + std::abs(slope) * (n.t0 + dt) + C * dt * (n.t0 + dt));
+    // Hidden: the parabola z0 + z0' s + C s^2 / 2 minus the line is convex, so under it at both ends
+    // means under it everywhere.
+    if (rise <= k_run * n.t0 - slack && rise + slope * dt + 0.5 * C * dt * dt <= k_run * n.t1 - slack) {
+      ++st.curvature_hidden;
+      return Shape::hidden;
+    }
+    // Rising: t dk/dt = z'(t) - k(t) >= (t0 (z0' - k0) - C t0 s - 1.5 C s^2) / t at t = t0 + s (from
+    // z' >= z0' - C s and the parabola), decreasing in s: positive at s = dt means k rises through
+    // the whole node, so it holds no maximum and only its far end matters.
+    if (n.t0 * slope - rise > C * dt * (n.t0 + 1.5 * dt) + slack) {
+      ++st.curvature_rising;
+      return Shape::rising;
+    }
+    return Shape::unknown;
+  };
   std::vector<Node> stack;
   stack.reserve(64);
   stack.push_back({top, 0, 0, t_in, t_out});
@@ -79,9 +105,18 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     const double line_min = o.z + k_run * (k_run >= 0.0 ? n.t0 : n.t1);
     if (k_run >= 0.0 && o.z + k_run * n.t0 > z_max + eps) break;  // the line is above everything that follows
     const Heightfield::Level& L = hf.mip[n.level];
-    if (opt.use_mipmap && L.hi[size_t(n.j) * L.w + n.i] <= line_min - eps) {
+    const size_t k = size_t(n.j) * L.w + n.i;
+    const Shape shape = !opt.use_mipmap                ? Shape::unknown
+                        : L.hi[k] <= line_min - eps    ? Shape::hidden
+                        : opt.curvature_test           ? classify(n, L, k)
+                                                       : Shape::unknown;
+    if (shape == Shape::hidden) {
       have_prev = false;
       last_is_record = false;
+      continue;
+    }
+    if (shape == Shape::rising) {  // no maximum inside: continue the run from the node's far end
+      add_sample(sample_at(n.t1));
       continue;
     }
     if (n.level > 0) {

@@ -6,6 +6,14 @@
 // the far edge of the footprint when k still rises there, plus the near edge when o is outside the
 // footprint. Everything below the running maximum slope is hidden, so mipmap nodes whose maximum
 // height lies under the line o_z + k_run t are skipped (Eq. 13, Fig. 6).
+// Curvature tests (limn's additions): near an origin on the surface that bound never holds, since
+// the surface rises along its tangent plane as fast as the line, and where the slope k rises (the
+// visible run before a peak, a pixel's footprint seen from the camera) every cell is a record; so
+// every cell there was sampled and cells per sample grew with the side length. With the node's
+// bound C on the second derivative along d, the surface over the node's span [t0, t1] lies under
+// the parabola z(t0) + z'(t0) s + C s^2 / 2 and its slope above z'(t0) - C s (s = t - t0). A node is
+// skipped as hidden when that parabola stays under the line, and is passed over to its far end when
+// the bounds prove dk/dt > 0 throughout (no maximum inside).
 #pragma once
 #include <vector>
 #include "core/heightfield/heightfield.h"
@@ -21,11 +29,14 @@ struct SlicePeak {
 struct PeakSearchStats {
   uint64_t nodes = 0;   // mipmap nodes visited
   uint64_t cells = 0;   // level-0 cells sampled
+  uint64_t curvature_hidden = 0;  // nodes skipped by the curvature test: under the line
+  uint64_t curvature_rising = 0;  // ... or with k rising throughout (no maximum inside)
 };
 
 struct PeakSearchOptions {
   bool use_mipmap = true;   // false: march every cell (the brute-force search, for comparison)
   int samples_per_cell = 4; // k is sampled at this many sub-steps per cell crossing
+  bool curvature_test = true;  // with the mipmap: also skip nodes by their second-derivative bound
 };
 
 // Peaks with k in (k_start, k_stop), in order of increasing t (and so of increasing k). k_start is

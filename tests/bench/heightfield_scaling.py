@@ -1,6 +1,7 @@
 """Heightfield cost against resolution (the heightfield paper's Figure 2 / A3 kind of study), in one run:
 time per sample per pixel of the forward pass (render) and of the backward pass (render_backward with
-the heightfield estimator, mipmap search and brute-force search) on the terrain and on the worst
+the heightfield estimator: mipmap search with its curvature tests, with the maximum test alone, and
+brute-force search) on the terrain and on the worst
 case of Figure A2 (a smooth bump under a very large light), for 256^2 .. 2048^2 heights; and the
 theta sub-range trade-off of App. C on the worst case (time against gradient variance).
 
@@ -72,10 +73,13 @@ def main() -> None:
             fwd = timed(lambda: scene.render(spp=args.spp), args.repeats)
             bwd = timed(lambda: scene.render_backward(adjoint, spp=args.spp), args.repeats)
             c_fast = cells(scene)
+            max_only = timed(lambda: scene.render_backward(adjoint, spp=args.spp, heightfield_curvature_test=False), args.repeats)
+            c_max = cells(scene)
             brute = timed(lambda: scene.render_backward(adjoint, spp=args.spp, heightfield_mipmap=False), 1)
             c_slow = cells(scene)
-            rows.append(dict(scene=name, n=n, fwd=fwd / px * 1e6, bwd=bwd / px * 1e6, brute=brute / px * 1e6,
-                             ratio=bwd / fwd, cells=c_fast / px, cells_brute=c_slow / px))
+            rows.append(dict(scene=name, n=n, fwd=fwd / px * 1e6, bwd=bwd / px * 1e6, max_only=max_only / px * 1e6,
+                             brute=brute / px * 1e6, ratio=bwd / fwd, cells=c_fast / px, cells_max=c_max / px,
+                             cells_brute=c_slow / px))
             print(rows[-1], flush=True)
 
     # App. C on the worst case: time and gradient variance per theta sub-range (same budget).
@@ -102,7 +106,8 @@ def main() -> None:
         r = [x for x in rows if x["scene"] == name]
         ns = [x["n"] for x in r]
         ax.loglog(ns, [x["fwd"] for x in r], "o-", label="forward (render)")
-        ax.loglog(ns, [x["bwd"] for x in r], "s-", label="backward, mipmap search")
+        ax.loglog(ns, [x["bwd"] for x in r], "s-", label="backward, mipmap search with curvature tests")
+        ax.loglog(ns, [x["max_only"] for x in r], "d:", label="backward, mipmap maximum test only")
         ax.loglog(ns, [x["brute"] for x in r], "^--", label="backward, brute-force search")
         ax.set_xlabel("heights per side")
         ax.set_ylabel("microseconds per sample")
@@ -118,14 +123,17 @@ def main() -> None:
              "all numbers of one table come from one run.", "",
              "Time per sample per pixel (microseconds) of the forward pass (`Scene.render`, the path tracer "
              "through the mipmap ray traversal) and of the backward pass (`render_backward` with the heightfield "
-             "estimator: peak search per slice, taped path, reverse sweep), with the maximum-mipmap peak search "
-             "and with the brute-force search that samples every cell along each slice. `cells` is the number of "
-             "level-0 cells the search sampled per camera sample.", "",
-             "| scene | heights | forward us | backward us | backward / forward | brute-force backward us | cells (mipmap) | cells (brute force) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "estimator: peak search per slice, taped path, reverse sweep) with the maximum-mipmap peak search "
+             "and its curvature tests (core/heightfield/peak_search.h, the default), with the mipmap's maximum test "
+             "alone (the paper's Algorithm 1, `heightfield_curvature_test=False`), and with the brute-force search that "
+             "samples every cell along each slice. `cells` is the number of level-0 cells the search sampled per "
+             "camera sample.", "",
+             "| scene | heights | forward us | backward us | backward / forward | maximum test only: backward us | brute-force backward us "
+             "| cells (curvature tests) | cells (maximum test only) | cells (brute force) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for x in rows:
-        lines.append(f"| {x['scene']} | {x['n']}^2 | {x['fwd']:.2f} | {x['bwd']:.2f} | {x['ratio']:.1f} | {x['brute']:.2f} | "
-                     f"{x['cells']:.0f} | {x['cells_brute']:.0f} |")
+        lines.append(f"| {x['scene']} | {x['n']}^2 | {x['fwd']:.2f} | {x['bwd']:.2f} | {x['ratio']:.1f} | {x['max_only']:.2f} | "
+                     f"{x['brute']:.2f} | {x['cells']:.0f} | {x['cells_max']:.0f} | {x['cells_brute']:.0f} |")
     lines += ["", "![cost against resolution](scaling.png)", "",
               "## Theta sub-ranges on the worst case (App. C)", "",
               "Bump with 512^2 heights under the 40x40 light, 32x32 film, 8 spp, 8 seeds: median time of one "

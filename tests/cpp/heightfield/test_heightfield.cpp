@@ -89,6 +89,14 @@ TEST_CASE("heightfield: the mipmap bounds the surface; incremental updates equal
     const double z = hf.eval(x, y).z;
     CHECK(z <= hf.mip[0].hi[cell] + 1e-6);
     CHECK(z >= hf.mip[0].lo[cell] - 1e-6);
+    // The second-derivative bounds of the curvature tests (peak_search.h), at a random point of
+    // the cell and up the pyramid (a parent bounds its children).
+    const HeightSample h = hf.eval(x, y);
+    CHECK(std::abs(h.dxx) <= hf.mip[0].zxx[cell] * (1.0 + 1e-5) + 1e-9);
+    CHECK(std::abs(h.dyy) <= hf.mip[0].zyy[cell] * (1.0 + 1e-5) + 1e-9);
+    CHECK(std::abs(h.dxy) <= hf.mip[0].zxy[cell] * (1.0 + 1e-5) + 1e-9);
+    const size_t parent = size_t(pc.r0 / 2) * hf.mip[1].w + pc.c0 / 2;
+    CHECK(hf.mip[0].zxx[cell] <= hf.mip[1].zxx[parent]);
   }
   CHECK(hf.mip.back().w == 1);
   CHECK(hf.mip.back().h == 1);
@@ -103,6 +111,9 @@ TEST_CASE("heightfield: the mipmap bounds the surface; incremental updates equal
   for (size_t l = 0; l < hf.mip.size(); ++l) {
     CHECK(hf.mip[l].hi == fresh.mip[l].hi);
     CHECK(hf.mip[l].lo == fresh.mip[l].lo);
+    CHECK(hf.mip[l].zxx == fresh.mip[l].zxx);
+    CHECK(hf.mip[l].zyy == fresh.mip[l].zyy);
+    CHECK(hf.mip[l].zxy == fresh.mip[l].zxy);
   }
   CHECK(hf.update_mipmap() == 0);  // nothing changed since
 }

@@ -82,6 +82,42 @@ TEST_CASE("peak search: peaks are the record slope maxima, with and without the 
   CHECK(total > 20);
 }
 
+TEST_CASE("peak search: the curvature test finds the same peaks from far fewer cells on a fine smooth field") {
+  // 513^2 heights of a smooth surface (no noise): near an origin on it the maximum test cannot
+  // skip the cells the tangent line runs over; the second-derivative bound does.
+  Heightfield hf;
+  hf.nx = hf.ny = 513;
+  for (int r = 0; r < hf.ny; ++r)
+    for (int c = 0; c < hf.nx; ++c) hf.heights.push_back(0.15f * std::sin(0.02f * c + 0.013f * r) + 0.1f * std::cos(0.017f * r));
+  hf.build_mipmap();
+  Pcg32 rng(8);
+  uint64_t cells_max = 0, cells_curv = 0, skips = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    const double x = (rng.next_float() - 0.5) * 1.6, y = (rng.next_float() - 0.5) * 1.6;
+    const HeightSample h = hf.eval(x, y);
+    const Vec3d o(x, y, h.z);
+    const double phi = 6.283185307 * rng.next_float();
+    const glm::dvec2 d(std::cos(phi), std::sin(phi));
+    const double k0 = h.dx * d.x + h.dy * d.y;
+    PeakSearchStats with, without;
+    const auto a = find_peaks(hf, o, d, k0, 1e30, {true, 4, true}, &with);
+    const auto b = find_peaks(hf, o, d, k0, 1e30, {true, 4, false}, &without);
+    REQUIRE(a.size() == b.size());
+    for (size_t i = 0; i < a.size(); ++i) {
+      CHECK(a[i].k == doctest::Approx(b[i].k).epsilon(1e-9));
+      CHECK(a[i].t == doctest::Approx(b[i].t).epsilon(1e-6));
+      CHECK(a[i].border == b[i].border);
+    }
+    cells_max += without.cells;
+    cells_curv += with.cells;
+    skips += with.curvature_hidden + with.curvature_rising;
+    CHECK(without.curvature_hidden + without.curvature_rising == 0);
+  }
+  MESSAGE("cells: maximum test ", cells_max, ", with the curvature test ", cells_curv, " (", skips, " nodes skipped by it)");
+  CHECK(skips > 0);
+  CHECK(2 * cells_curv < cells_max);
+}
+
 TEST_CASE("peak search: visibility of the ray tracer jumps exactly at the peaks") {
   const Heightfield hf = terrain(49, 8);
   Pcg32 rng(9);
