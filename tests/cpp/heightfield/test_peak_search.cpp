@@ -42,6 +42,20 @@ std::vector<SlicePeak> dense_peaks(const Heightfield& hf, const Vec3d& o, const 
   }
   return out;
 }
+// A slice from a random point of the surface (lifted by `lift`) at a random azimuth, and the slope
+// of the tangent plane along it.
+struct SurfaceSlice {
+  Vec3d o;
+  glm::dvec2 d;
+  double k0;
+};
+SurfaceSlice random_slice(const Heightfield& hf, Pcg32& rng, double lift = 0.0) {
+  const double x = (rng.next_float() - 0.5) * 1.6, y = (rng.next_float() - 0.5) * 1.6;
+  const HeightSample h = hf.eval(x, y);
+  const double phi = 6.283185307 * rng.next_float();
+  const glm::dvec2 d(std::cos(phi), std::sin(phi));
+  return {Vec3d(x, y, h.z + lift), d, h.dx * d.x + h.dy * d.y};
+}
 }  // namespace
 
 TEST_CASE("peak search: peaks are the record slope maxima, with and without the mipmap") {
@@ -49,12 +63,7 @@ TEST_CASE("peak search: peaks are the record slope maxima, with and without the 
   Pcg32 rng(5);
   int total = 0;
   for (int trial = 0; trial < 40; ++trial) {
-    const double x = (rng.next_float() - 0.5) * 1.6, y = (rng.next_float() - 0.5) * 1.6;
-    const HeightSample h = hf.eval(x, y);
-    const Vec3d o(x, y, h.z);
-    const double phi = 6.283185307 * rng.next_float();
-    const glm::dvec2 d(std::cos(phi), std::sin(phi));
-    const double k0 = h.dx * d.x + h.dy * d.y;  // tangent plane along d
+    const auto [o, d, k0] = random_slice(hf, rng);
     PeakSearchStats fast_stats, slow_stats;
     const auto fast = find_peaks(hf, o, d, k0, 1e30, {}, &fast_stats);
     const auto slow = find_peaks(hf, o, d, k0, 1e30, {false, 4}, &slow_stats);
@@ -93,12 +102,7 @@ TEST_CASE("peak search: the curvature test finds the same peaks from far fewer c
   Pcg32 rng(8);
   uint64_t cells_max = 0, cells_curv = 0, skips = 0;
   for (int trial = 0; trial < 60; ++trial) {
-    const double x = (rng.next_float() - 0.5) * 1.6, y = (rng.next_float() - 0.5) * 1.6;
-    const HeightSample h = hf.eval(x, y);
-    const Vec3d o(x, y, h.z);
-    const double phi = 6.283185307 * rng.next_float();
-    const glm::dvec2 d(std::cos(phi), std::sin(phi));
-    const double k0 = h.dx * d.x + h.dy * d.y;
+    const auto [o, d, k0] = random_slice(hf, rng);
     PeakSearchStats with, without;
     const auto a = find_peaks(hf, o, d, k0, 1e30, {true, 4, true}, &with);
     const auto b = find_peaks(hf, o, d, k0, 1e30, {true, 4, false}, &without);
@@ -123,12 +127,8 @@ TEST_CASE("peak search: visibility of the ray tracer jumps exactly at the peaks"
   Pcg32 rng(9);
   int checked = 0;
   for (int trial = 0; trial < 60; ++trial) {
-    const double x = (rng.next_float() - 0.5) * 1.6, y = (rng.next_float() - 0.5) * 1.6;
-    const HeightSample h = hf.eval(x, y);
-    const Vec3d o(x, y, h.z + 1e-6);
-    const double phi = 6.283185307 * rng.next_float();
-    const glm::dvec2 d(std::cos(phi), std::sin(phi));
-    for (const SlicePeak& p : find_peaks(hf, o, d, h.dx * d.x + h.dy * d.y, 1e30)) {
+    const auto [o, d, k0] = random_slice(hf, rng, 1e-6);
+    for (const SlicePeak& p : find_peaks(hf, o, d, k0, 1e30)) {
       for (double dk : {1e-4, -1e-4}) {
         const Vec3d dir = glm::normalize(Vec3d(d.x, d.y, p.k + dk));
         double t;
@@ -168,12 +168,8 @@ TEST_CASE("peak search: rays steeper than the last peak leave the field; 'blocke
   Pcg32 rng(21);
   int escaped = 0, blocked_count = 0;
   for (int trial = 0; trial < 200; ++trial) {
-    const double x = (rng.next_float() - 0.5) * 1.6, y = (rng.next_float() - 0.5) * 1.6;
-    const HeightSample h = hf.eval(x, y);
-    const Vec3d o(x, y, h.z + 1e-6);
-    const double phi = 6.283185307 * rng.next_float();
-    const glm::dvec2 d(std::cos(phi), std::sin(phi));
-    const double k0 = h.dx * d.x + h.dy * d.y, k_stop = k0 + 0.4 * rng.next_float();
+    const auto [o, d, k0] = random_slice(hf, rng, 1e-6);
+    const double k_stop = k0 + 0.4 * rng.next_float();
     bool blocked = false;
     const auto peaks = find_peaks(hf, o, d, k0, k_stop, {}, nullptr, &blocked);
     double t;
