@@ -1,5 +1,7 @@
 #include "core/diff/boundary_space.h"
 
+#include <algorithm>
+
 #include "core/math/frame.h"
 #include "core/math/warp.h"
 
@@ -17,6 +19,25 @@ uint32_t opposite_vertex(const Mesh& m, int f, uint32_t a, uint32_t b) {
 // Probe offset: a fraction of the local feature size keeps the probes beside this boundary only;
 // the second term (~8 ulps of |x_b|) keeps them above float resolution.
 float probe_offset(float feature_size, const Vec3& xb) { return 1e-4f * feature_size + 1e-6f * max_component(glm::abs(xb)); }
+
+// 30-bit Morton code of p inside the cube at lo with the box [lo, hi]'s largest side (10 bits per
+// axis; one scale for all axes, so that a thin axis does not split patches as a full one would).
+uint32_t morton_code(const Vec3& p, const Vec3& lo, const Vec3& hi) {
+  const float extent = max_component(hi - lo);
+  auto spread = [](uint32_t v) {  // 10 bits -> every third bit
+    v = (v | (v << 16)) & 0x030000FFu;
+    v = (v | (v << 8)) & 0x0300F00Fu;
+    v = (v | (v << 4)) & 0x030C30C3u;
+    v = (v | (v << 2)) & 0x09249249u;
+    return v;
+  };
+  uint32_t code = 0;
+  for (int a = 0; a < 3; ++a) {
+    const float f = extent > 0.0f ? std::clamp((p[a] - lo[a]) / extent, 0.0f, 1.0f) : 0.0f;
+    code |= spread(std::min(1023u, uint32_t(f * 1024.0f))) << a;
+  }
+  return code;
+}
 
 float wrap_unit(float x) {
   x -= std::floor(x);
@@ -50,12 +71,26 @@ BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_s
       const bool moving = oi < moving_count;
       if (pass == 0 && shape.is_mesh()) {
         const Mesh& m = shape.mesh();
+        // Edges in Morton order of their midpoints: neighbouring u.x then means neighbouring edges,
+        // so a guide's slab or cell along the first axis holds one patch of the surface instead of
+        // edges from all over it (a scanned mesh's edge order is nearly random in space).
+        Vec3 lo(kInfinity), hi(-kInfinity);
+        for (size_t v = 0; v < m.vertex_count(); ++v) {
+          lo = glm::min(lo, m.vertex(uint32_t(v)));
+          hi = glm::max(hi, m.vertex(uint32_t(v)));
+        }
+        std::vector<std::pair<uint32_t, const MeshEdge*>> ordered;
         for (const MeshEdge& e : m.edges) {
           if (!edge_can_be_silhouette(m, e)) continue;
           const float len = glm::length(m.vertex(e.b) - m.vertex(e.a));
           if (!(len > 0.0f)) continue;
+          ordered.push_back({morton_code(0.5f * (m.vertex(e.a) + m.vertex(e.b)), lo, hi), &e});
+        }
+        std::stable_sort(ordered.begin(), ordered.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+        for (const auto& [code, ep] : ordered) {
+          const MeshEdge& e = *ep;
           m_segments.push_back({BoundarySegment::Kind::MeshEdge, si, moving, e.a, e.b, e.face0, e.face_count == 2 ? e.face1 : -1});
-          m_measure.push_back(4.0f * kPi * len);
+          m_measure.push_back(4.0f * kPi * glm::length(m.vertex(e.b) - m.vertex(e.a)));
           (moving ? moving_measure : static_measure) += m_measure.back();
         }
       } else if (pass == 1 && shape.is_sphere()) {  // heightfields: their own estimator (core/heightfield)

@@ -1,5 +1,7 @@
 #include "core/guiding/mixture.h"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -12,10 +14,12 @@ GuideMixture::GuideMixture(std::shared_ptr<const BoundaryGuide> first, std::shar
 }
 
 Vec3 GuideMixture::sample(const Vec3& u, float* pdf) const {
-  // The first number picks the component and is reused, rescaled, inside it.
+  // The first number picks the component and is reused, rescaled (and kept below 1 against
+  // rounding), inside it.
+  const float below_one = std::nextafter(1.0f, 0.0f);
   float unused;
-  const Vec3 p = u.x < m_w ? m_second->sample(Vec3(u.x / m_w, u.y, u.z), &unused)
-                           : m_first->sample(Vec3((u.x - m_w) / (1.0f - m_w), u.y, u.z), &unused);
+  const Vec3 p = u.x < m_w ? m_second->sample(Vec3(std::min(u.x / m_w, below_one), u.y, u.z), &unused)
+                           : m_first->sample(Vec3(std::min((u.x - m_w) / (1.0f - m_w), below_one), u.y, u.z), &unused);
   *pdf = this->pdf(p);
   return p;
 }

@@ -6,6 +6,10 @@
 #include "core/io/scene_loader.h"
 #include "core/math/rng.h"
 
+#include <algorithm>
+#include <array>
+#include <sstream>
+
 using namespace limn;
 
 namespace {
@@ -92,4 +96,59 @@ TEST_CASE("boundary space: delta-light points graze the boundary") {
     }
     CHECK(length / n == doctest::Approx(2.0 * kPi * 0.7 * sin_alpha).epsilon(0.02));
   }
+}
+
+TEST_CASE("boundary space: edges follow each other in space, whatever the mesh's face order") {
+  // A bumpy 24 x 24 sheet whose triangles are listed in random order (like a scanned mesh): the
+  // space orders edges by the Morton code of their midpoints, so 32 consecutive segments (about
+  // one guide slab) cover a small patch; in face order they span most of the sheet.
+  const int n = 24;
+  std::ostringstream v, f;
+  v << "[";
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const float x = float(i) / (n - 1), y = float(j) / (n - 1);
+      v << (i + j ? "," : "") << "[" << x << "," << y << "," << 0.1f * std::sin(9.0f * x) * std::cos(7.0f * y) << "]";
+    }
+  v << "]";
+  std::vector<std::array<int, 3>> tris;
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      const int a = j * n + i;
+      tris.push_back({a, a + 1, a + n + 1});
+      tris.push_back({a, a + n + 1, a + n});
+    }
+  Pcg32 rng(4);
+  for (size_t k = tris.size() - 1; k > 0; --k) std::swap(tris[k], tris[size_t(rng.next_float() * (k + 1)) % (k + 1)]);
+  f << "[";
+  for (size_t k = 0; k < tris.size(); ++k) f << (k ? "," : "") << "[" << tris[k][0] << "," << tris[k][1] << "," << tris[k][2] << "]";
+  f << "]";
+  const std::string text = R"({"type": "scene", "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
+      "sheet": {"type": "mesh", "vertex_positions": )" + v.str() + R"(, "faces": )" + f.str() + "}}";
+  auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
+  const DiffParams params(*scene, {"sheet.vertex_positions"});
+  const BoundarySpace space(*scene, params);
+  const Mesh& m = scene->shapes[0].mesh();
+  REQUIRE(space.edge_count() > 500);
+  // Median extent (in x, y) of 32 consecutive edge midpoints of an edge sequence.
+  auto median_extent = [&](const std::vector<std::pair<uint32_t, uint32_t>>& edges) {
+    std::vector<float> extents;
+    for (size_t start = 0; start + 32 <= edges.size(); start += 32) {
+      Vec3 lo(kInfinity), hi(-kInfinity);
+      for (size_t k = start; k < start + 32; ++k) {
+        const Vec3 mid = 0.5f * (m.vertex(edges[k].first) + m.vertex(edges[k].second));
+        lo = glm::min(lo, mid);
+        hi = glm::max(hi, mid);
+      }
+      extents.push_back(std::max(hi.x - lo.x, hi.y - lo.y));
+    }
+    std::sort(extents.begin(), extents.end());
+    return extents[extents.size() / 2];
+  };
+  std::vector<std::pair<uint32_t, uint32_t>> in_space, in_face_order;
+  for (const BoundarySegment& seg : space.segments()) in_space.push_back({seg.a, seg.b});
+  for (const MeshEdge& e : m.edges) in_face_order.push_back({e.a, e.b});
+  const float ordered = median_extent(in_space), listed = median_extent(in_face_order);
+  MESSAGE("median extent of 32 consecutive edges: in the space ", ordered, ", in face order ", listed);
+  CHECK(ordered < 0.4f * listed);
 }
