@@ -18,6 +18,27 @@
 namespace limn {
 namespace {
 
+// Per-thread sums of n doubles, each thread's buffer made on its first use (no exemplar copied
+// into every thread) and reduced into the first buffer: for a 2048^2 heightfield the gradient has
+// 4M slots, and the copies and an extra total cost about as much as the samples of a small film.
+class ThreadSums {
+ public:
+  explicit ThreadSums(size_t n) : m_n(n), m_local([n] { return std::vector<double>(n, 0.0); }) {}
+  std::vector<double>& local() { return m_local.local(); }
+  std::vector<double> reduce() {
+    auto it = m_local.begin();
+    if (it == m_local.end()) return std::vector<double>(m_n, 0.0);
+    std::vector<double> total = std::move(*it);
+    for (++it; it != m_local.end(); ++it)
+      for (size_t i = 0; i < m_n; ++i) total[i] += (*it)[i];
+    return total;
+  }
+
+ private:
+  size_t m_n;
+  tbb::enumerable_thread_specific<std::vector<double>> m_local;
+};
+
 // Runs `per_path(x, y, rng)` for spp paths in every pixel over tiles, with progress and cancel.
 template <typename PerPixel>
 void for_each_pixel(const Scene& scene, const DiffOptions& opt, PerPixel&& per_pixel) {
@@ -431,7 +452,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
     return img;
   }
   // Boundary terms splat into per-thread images.
-  tbb::enumerable_thread_specific<std::vector<double>> images(std::vector<double>(size_t(W) * H * 3, 0.0));
+  ThreadSums images(size_t(W) * H * 3);
   const BoundaryTerms terms = run_boundary_terms(scene, params, opt, rays, [&](const PathInputs& in,
       const std::vector<IndirectBoundary::Splat>& splats, const std::vector<ad::Var>& vel) {
     std::vector<double> adj, d(vel.size(), 0.0);
@@ -442,8 +463,8 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
       for (int c = 0; c < 3; ++c) im[3 * size_t(sp.pixel) + c] += double(sp.value[c]) * d[sp.velocity];
     }
   });
-  for (const auto& im : images)
-    for (size_t i = 0; i < im.size(); ++i) img.rgb[i] += float(im[i]);
+  const std::vector<double> splatted = images.reduce();
+  for (size_t i = 0; i < splatted.size(); ++i) img.rgb[i] += float(splatted[i]);
   ad::Tape::current().clear();
   fill_stats(stats, start, uint64_t(W) * H * spp, rays, invalid, summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get(), &terms));
   return img;
@@ -462,7 +483,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
   const auto lock = scene.render_lock();
   const int max_depth = effective_max_depth(scene, opt.max_depth);
   const int spp = opt.spp_interior > 0 ? opt.spp_interior : scene.spp;
-  tbb::enumerable_thread_specific<std::vector<double>> grads(std::vector<double>(params.slot_count(), 0.0));
+  ThreadSums grads(params.slot_count());
   std::atomic<uint64_t> rays{0}, invalid{0};
   const std::unique_ptr<HeightfieldEstimator> hfe = heightfield_estimator(scene, params, opt);
   tbb::enumerable_thread_specific<HeightfieldCounters> hf_counters;
@@ -496,11 +517,8 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
   });
   if (hfe) {
     ad::Tape::current().clear();
-    std::vector<double> total(params.slot_count(), 0.0);
-    for (const auto& g : grads)
-      for (size_t i = 0; i < total.size(); ++i) total[i] += g[i];
     finish_heightfield(stats, start, uint64_t(W) * H * spp, rays, invalid, scene, spp, opt, *hfe, hf_counters);
-    return total;
+    return grads.reduce();
   }
   auto scatter = [&](const ad::Var& v, double weight, const PathInputs& in) {
     if (weight == 0.0 || v.is_constant()) return;
@@ -521,9 +539,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
     for (size_t i = 0; i < vel.size(); ++i) scatter(vel[i], w[i], in);
   });
   ad::Tape::current().clear();
-  std::vector<double> total(params.slot_count(), 0.0);
-  for (const auto& g : grads)
-    for (size_t i = 0; i < total.size(); ++i) total[i] += g[i];
+  std::vector<double> total = grads.reduce();
   fill_stats(stats, start, uint64_t(W) * H * spp, rays, invalid, summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get(), &terms));
   return total;
 }

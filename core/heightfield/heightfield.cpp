@@ -97,12 +97,12 @@ void cell_bounds(const Heightfield& hf, int c0, int r0, Heightfield::Level& L) {
     }
   const double s = hf.height_scale, sx = (hf.nx - 1) / double(hf.width), sy = (hf.ny - 1) / double(hf.depth);
   const size_t k = size_t(r0) * L.w + c0;
-  L.lo[k] = float(lo) * hf.height_scale;
-  L.hi[k] = float(hi) * hf.height_scale;
+  L.node[k].lo = float(lo) * hf.height_scale;
+  L.node[k].hi = float(hi) * hf.height_scale;
   // Rounded up by a float ulp or so, so that the bound stays a bound after the conversion.
-  L.zxx[k] = float(s * cc * sx * sx * (1.0 + 1e-6));
-  L.zyy[k] = float(s * rr * sy * sy * (1.0 + 1e-6));
-  L.zxy[k] = float(s * cr * sx * sy * (1.0 + 1e-6));
+  L.node[k].zxx = float(s * cc * sx * sx * (1.0 + 1e-6));
+  L.node[k].zyy = float(s * rr * sy * sy * (1.0 + 1e-6));
+  L.node[k].zxy = float(s * cr * sx * sy * (1.0 + 1e-6));
 }
 
 // Recomputes cells [x0, x1] x [y0, y1] of level l from level l - 1.
@@ -117,18 +117,18 @@ void reduce(Heightfield& hf, int l, int x0, int x1, int y0, int y1) {
           const int si = 2 * i + a, sj = 2 * j + b;
           if (si >= src.w || sj >= src.h) continue;
           const size_t k = size_t(sj) * src.w + si;
-          lo = std::min(lo, src.lo[k]);
-          hi = std::max(hi, src.hi[k]);
-          xx = std::max(xx, src.zxx[k]);
-          yy = std::max(yy, src.zyy[k]);
-          xy = std::max(xy, src.zxy[k]);
+          lo = std::min(lo, src.node[k].lo);
+          hi = std::max(hi, src.node[k].hi);
+          xx = std::max(xx, src.node[k].zxx);
+          yy = std::max(yy, src.node[k].zyy);
+          xy = std::max(xy, src.node[k].zxy);
         }
       const size_t k = size_t(j) * dst.w + i;
-      dst.lo[k] = lo;
-      dst.hi[k] = hi;
-      dst.zxx[k] = xx;
-      dst.zyy[k] = yy;
-      dst.zxy[k] = xy;
+      dst.node[k].lo = lo;
+      dst.node[k].hi = hi;
+      dst.node[k].zxx = xx;
+      dst.node[k].zyy = yy;
+      dst.node[k].zxy = xy;
     }
 }
 
@@ -147,8 +147,7 @@ void Heightfield::build_mipmap() {
   mip.clear();
   int w = cells_x(), h = cells_y();
   auto level = [](int w, int h) {
-    const std::vector<float> v(size_t(w) * h);
-    return Level{w, h, v, v, v, v, v};
+    return Level{w, h, std::vector<NodeBounds>(size_t(w) * h)};
   };
   mip.push_back(level(w, h));
   while (w > 1 || h > 1) {
@@ -226,7 +225,7 @@ bool Heightfield::intersect_local(const Vec3d& o, const Vec3d& d, double tmin, d
     const Level& L = mip[n.level];
     const size_t k = size_t(n.j) * L.w + n.i;
     const double za = o.z + n.t0 * d.z, zb = o.z + t1 * d.z;
-    if (std::min(za, zb) > L.hi[k] + eps || std::max(za, zb) < L.lo[k] - eps) continue;
+    if (std::min(za, zb) > L.node[k].hi + eps || std::max(za, zb) < L.node[k].lo - eps) continue;
     if (n.level > 0) {
       std::array<Node, 4> kids;
       int count = 0;

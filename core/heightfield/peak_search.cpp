@@ -74,7 +74,7 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
   enum class Shape { unknown, hidden, rising };
   auto classify = [&](const Node& n, const Heightfield::Level& L, size_t k) {
     if (!(n.t0 > 0.0)) return Shape::unknown;  // the origin's own node: k is not defined at t0
-    const double C = L.zxx[k] * adx2 + L.zyy[k] * ady2 + L.zxy[k] * adxy;
+    const double C = L.node[k].zxx * adx2 + L.node[k].zyy * ady2 + L.node[k].zxy * adxy;
     const HeightSample h = hf.eval(o.x + n.t0 * d.x, o.y + n.t0 * d.y);
     const double dt = n.t1 - n.t0, slope = h.dx * d.x + h.dy * d.y, rise = h.z - o.z;
     // eps as for the maximum test, plus the rounding of the bounds' own terms.
@@ -107,7 +107,7 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     const Heightfield::Level& L = hf.mip[n.level];
     const size_t k = size_t(n.j) * L.w + n.i;
     const Shape shape = !opt.use_mipmap                ? Shape::unknown
-                        : L.hi[k] <= line_min - eps    ? Shape::hidden
+                        : L.node[k].hi <= line_min - eps    ? Shape::hidden
                         : opt.curvature_test           ? classify(n, L, k)
                                                        : Shape::unknown;
     if (shape == Shape::hidden) {

@@ -87,16 +87,16 @@ TEST_CASE("heightfield: the mipmap bounds the surface; incremental updates equal
     const PatchCoords pc = hf.patch(x, y);
     const size_t cell = size_t(pc.r0) * hf.mip[0].w + pc.c0;
     const double z = hf.eval(x, y).z;
-    CHECK(z <= hf.mip[0].hi[cell] + 1e-6);
-    CHECK(z >= hf.mip[0].lo[cell] - 1e-6);
+    CHECK(z <= hf.mip[0].node[cell].hi + 1e-6);
+    CHECK(z >= hf.mip[0].node[cell].lo - 1e-6);
     // The second-derivative bounds of the curvature tests (peak_search.h), at a random point of
     // the cell and up the pyramid (a parent bounds its children).
     const HeightSample h = hf.eval(x, y);
-    CHECK(std::abs(h.dxx) <= hf.mip[0].zxx[cell] * (1.0 + 1e-5) + 1e-9);
-    CHECK(std::abs(h.dyy) <= hf.mip[0].zyy[cell] * (1.0 + 1e-5) + 1e-9);
-    CHECK(std::abs(h.dxy) <= hf.mip[0].zxy[cell] * (1.0 + 1e-5) + 1e-9);
+    CHECK(std::abs(h.dxx) <= hf.mip[0].node[cell].zxx * (1.0 + 1e-5) + 1e-9);
+    CHECK(std::abs(h.dyy) <= hf.mip[0].node[cell].zyy * (1.0 + 1e-5) + 1e-9);
+    CHECK(std::abs(h.dxy) <= hf.mip[0].node[cell].zxy * (1.0 + 1e-5) + 1e-9);
     const size_t parent = size_t(pc.r0 / 2) * hf.mip[1].w + pc.c0 / 2;
-    CHECK(hf.mip[0].zxx[cell] <= hf.mip[1].zxx[parent]);
+    CHECK(hf.mip[0].node[cell].zxx <= hf.mip[1].node[parent].zxx);
   }
   CHECK(hf.mip.back().w == 1);
   CHECK(hf.mip.back().h == 1);
@@ -105,15 +105,11 @@ TEST_CASE("heightfield: the mipmap bounds the surface; incremental updates equal
     for (int c = 30; c < 33; ++c) hf.heights[size_t(r) * hf.nx + c] += 2.0f;
   const size_t recomputed = hf.update_mipmap();
   CHECK(recomputed > 0);
-  CHECK(recomputed < hf.mip[0].hi.size() / 4);  // only the neighbourhood, not the whole grid
+  CHECK(recomputed < hf.mip[0].node.size() / 4);  // only the neighbourhood, not the whole grid
   Heightfield fresh = hf;
   fresh.build_mipmap();
   for (size_t l = 0; l < hf.mip.size(); ++l) {
-    CHECK(hf.mip[l].hi == fresh.mip[l].hi);
-    CHECK(hf.mip[l].lo == fresh.mip[l].lo);
-    CHECK(hf.mip[l].zxx == fresh.mip[l].zxx);
-    CHECK(hf.mip[l].zyy == fresh.mip[l].zyy);
-    CHECK(hf.mip[l].zxy == fresh.mip[l].zxy);
+    CHECK(hf.mip[l].node == fresh.mip[l].node);
   }
   CHECK(hf.update_mipmap() == 0);  // nothing changed since
 }
