@@ -107,18 +107,7 @@ def mitsuba_worker(work: str, config: str, budgets: list[int], runs: int) -> Non
     primal = np.array(mi.render(scene, spp=1024, seed=5))[..., :3].astype(np.float64)
 
     def gradient(spp: int, seed: int):
-        theta = mi.Float(0.0)
-        dr.enable_grad(theta)
-        params[key] = base + theta * tangent
-        params.update()
-        dr.forward(theta, dr.ADFlag.ClearEdges)
-        t0 = time.perf_counter()
-        image = mi.render(scene, params, spp=spp, seed=seed)
-        dr.forward_to(image)
-        g = dr.grad(image)
-        dr.eval(g)
-        out = np.array(g)[..., :3].astype(np.float64)
-        return out, time.perf_counter() - t0
+        return mc.mitsuba_gradient(scene, params, key, lambda theta: base + theta * tangent, spp, seed)
 
     # Mitsuba's own central difference (same eps as limn's reference): how far the two renderers'
     # surfaces differ in their derivative, whatever the estimator.

@@ -87,15 +87,11 @@ def mitsuba_scene(desc: dict, guiding: str, spp: int) -> dict:
     return out
 
 
-def mitsuba_gradient(scene, params, key, base, kind, spp, seed):
-    """Forward-mode derivative image of a translation along +x, and the seconds it took."""
+def mitsuba_gradient(scene, params, key, moved, spp, seed):
+    """Forward-mode derivative image along theta, where params[key] = moved(theta), and the seconds it took."""
     theta = mi.Float(0.0)
     dr.enable_grad(theta)
-    if kind == "sphere":
-        params[key] = mi.Transform4f().translate(mi.Vector3f(theta, 0.0, 0.0)) @ base
-    else:
-        shift = dr.tile(mi.Float([1.0, 0.0, 0.0]), dr.width(base) // 3)
-        params[key] = base + theta * shift
+    params[key] = moved(theta)
     params.update()
     dr.forward(theta, dr.ADFlag.ClearEdges)
     t0 = time.perf_counter()
@@ -105,7 +101,15 @@ def mitsuba_gradient(scene, params, key, base, kind, spp, seed):
     dr.eval(g)
     out = np.array(g)
     seconds = time.perf_counter() - t0
-    return out[..., :3], seconds
+    return out[..., :3].astype(np.float64), seconds
+
+
+def translation_x(kind, base):
+    """moved(theta) for a translation along +x of a sphere's to_world or of mesh vertices."""
+    if kind == "sphere":
+        return lambda theta: mi.Transform4f().translate(mi.Vector3f(theta, 0.0, 0.0)) @ base
+    shift = dr.tile(mi.Float([1.0, 0.0, 0.0]), dr.width(base) // 3)
+    return lambda theta: base + theta * shift
 
 
 def worker(name: str, guiding: str, budgets: list[int], runs: int) -> int:
@@ -123,12 +127,12 @@ def worker(name: str, guiding: str, budgets: list[int], runs: int) -> int:
     primal_mi = np.array(mi.render(msc, spp=1024, seed=5))[..., :3].astype(np.float64)
     ratio = float(primal_mi.mean() / primal_limn.mean())
     diff = float(np.sqrt(((primal_mi - primal_limn) ** 2).mean()) / np.sqrt((primal_limn ** 2).mean()))
-    mitsuba_gradient(msc, params, key, base, kind, 4, 999)  # JIT warm-up
+    mitsuba_gradient(msc, params, key, translation_x(kind, base), 4, 999)  # JIT warm-up
     rows = []
     for b in budgets:
         errs, secs = [], []
         for r in range(runs):
-            g, s = mitsuba_gradient(msc, params, key, base, kind, b, 7 + 100 * r)
+            g, s = mitsuba_gradient(msc, params, key, translation_x(kind, base), b, 7 + 100 * r)
             errs.append(((g - ref) ** 2).mean())
             secs.append(s)
         rows.append((f"Mitsuba {guiding}", b, float(np.mean(secs)), float(np.sqrt(np.mean(errs))) / rms))
