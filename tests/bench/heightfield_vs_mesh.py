@@ -157,7 +157,8 @@ def main() -> None:
 
     hf_scene = limn.load_dict(d)
     hf_scene.set_differentiable(["terrain.heights"])
-    mesh_scene = limn.load_dict(mesh_of(d))
+    mesh_desc = mesh_of(d)
+    mesh_scene = limn.load_dict(mesh_desc)
     mesh_scene.set_differentiable(["terrain.vertex_positions"])
     cases = {"heightfield": (hf_scene, {"terrain.heights": t_h}), "mesh": (mesh_scene, {"terrain.vertex_positions": t_mesh})}
 
@@ -189,8 +190,7 @@ def main() -> None:
     mitsuba_lines = []
     if args.mitsuba:
         work = tempfile.mkdtemp(prefix="limn_hf_mitsuba_")
-        md = mesh_of(d)
-        write_ply(os.path.join(work, "mesh.ply"), md["terrain"]["vertex_positions"], md["terrain"]["faces"])
+        write_ply(os.path.join(work, "mesh.ply"), mesh_desc["terrain"]["vertex_positions"], mesh_desc["terrain"]["faces"])
         np.save(os.path.join(work, "tangent.npy"), t_mesh)
         np.save(os.path.join(work, "reference.npy"), refs["mesh"])
         np.save(os.path.join(work, "primal.npy"), mesh_scene.render(spp=1024, seed=5).astype(np.float64))
