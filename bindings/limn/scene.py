@@ -123,6 +123,7 @@ class Scene:
                     "octree_grid_mix": 0.5,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
                     "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
+                    "heightfield_interval_mix": 0.5,
                     "theta_subrange": 0.0, "max_depth": None, "threads": 0}
 
     def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
@@ -153,6 +154,8 @@ class Scene:
             raise ValueError(f"guiding_seeds must be >= 1 or None (got {opts['guiding_seeds']})")
         if not (0.0 <= float(opts["octree_grid_mix"]) < 1.0):
             raise ValueError(f"octree_grid_mix must be in [0, 1) (got {opts['octree_grid_mix']})")
+        if not (0.0 <= float(opts["heightfield_interval_mix"]) <= 1.0):
+            raise ValueError(f"heightfield_interval_mix must be in [0, 1] (got {opts['heightfield_interval_mix']})")
         if not (0.0 <= float(opts["theta_subrange"]) < 180.0):
             raise ValueError(f"theta_subrange must be in [0, 180) degrees (got {opts['theta_subrange']})")
         self.update()
@@ -212,6 +215,9 @@ class Scene:
         ``heightfield_curvature_test=False`` skips mipmap nodes by their maximum height only (not
         also by the second-derivative bound, core/heightfield/peak_search.h; for comparison), and
         ``theta_subrange`` > 0 searches only a sub-range of that many degrees per sample (App. C);
+        ``heightfield_interval_mix`` (default 0.5) is the share of the choice of a theta interval
+        made uniformly over the intervals, the rest proportional to their widths (0: widths only,
+        whose per-sample derivatives have a heavy tail at slivers next to silhouettes);
         ``heightfield_reparam=False`` holds the split points fixed, which drops the visibility part
         of the derivative (a diagnostic, like ``spp_boundary=0``).
 

@@ -1,5 +1,6 @@
 #include "core/heightfield/estimator.h"
 
+#include <algorithm>
 #include <array>
 #include "core/diff/replay.h"
 #include "core/render/integrators/path.h"
@@ -199,22 +200,34 @@ struct HeightfieldPath {
     if (visible_only && !splits.empty() && splits.back().v < hi.v) hi = splits.back().var;  // the steepest peak
     if (!(hi.v > lo.v)) return false;
     for (size_t k = 0; k < E.m_area_emitters.size(); ++k) crossings(o, phi, emitter_triangles(k), splits);
-    // The intervals of (lo, hi), end points sorted by primal value.
+    // The intervals of (lo, hi), end points sorted by primal value; coinciding splits are merged
+    // (an interval of zero width holds no sample).
     std::vector<Split> cut{{lo.v, lo}};
     std::sort(splits.begin(), splits.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
     for (const Split& s : splits)
-      if (s.v > lo.v && s.v < hi.v) cut.push_back(s);
+      if (s.v > cut.back().v && s.v < hi.v) cut.push_back(s);
     cut.push_back({hi.v, hi});
     if (!E.m_opt.reparameterize)
       for (Split& c : cut) c.var = Var(c.v);
-    const double th0 = lo.v + double(rng.next_float()) * (hi.v - lo.v);
+    // Eq. 6: interval j with probability p_j = (1 - m) w_j / W + m / M (primal widths, so p_j is
+    // not differentiated). The reparameterised derivative (r_{j+1}' - r_j') f / p_j has a 1 / w_j
+    // tail under m = 0 (a sliver between a silhouette and a range end is rarely chosen and then
+    // weighted by 1 / w_j); the uniform share m bounds it by M / m.
+    const size_t M = cut.size() - 1;
+    const double W = hi.v - lo.v, m = M > 1 ? double(E.m_opt.interval_uniform_share) : 0.0;
+    const double u = double(rng.next_float());
     size_t j = 0;
-    while (j + 2 < cut.size() && th0 >= cut[j + 1].v) ++j;
+    double c = 0.0, pj = 0.0;
+    for (;; ++j) {
+      pj = (1.0 - m) * (cut[j + 1].v - cut[j].v) / W + m / double(M);
+      if (u < c + pj || j + 1 == M) break;
+      c += pj;
+    }
     const double w0 = cut[j + 1].v - cut[j].v;
-    if (!(w0 > 0.0)) return false;
+    if (!(w0 > 0.0) || !(pj > 0.0)) return false;
     const Var width = cut[j + 1].var - cut[j].var;
-    theta = cut[j].var + width * Var((th0 - cut[j].v) / w0);
-    weight = Var(inv_p * (hi.v - lo.v)) * width / Var(w0);
+    theta = cut[j].var + width * Var(std::clamp((u - c) / pj, 0.0, 1.0));
+    weight = Var(inv_p / pj) * width;
     return true;
   }
 

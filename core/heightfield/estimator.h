@@ -32,6 +32,9 @@ struct HeightfieldOptions {
   // false: split points are held at their primal values (their motion is dropped), which leaves
   // only the continuous part of the derivative: for tests that show what the reparameterisation adds.
   bool reparameterize = true;
+  // Share of the interval choice made uniformly over the intervals (the rest is proportional to
+  // their widths); see sample_theta in estimator.cpp.
+  float interval_uniform_share = 0.5f;
 };
 
 struct HeightfieldCounters {
