@@ -123,7 +123,7 @@ class Scene:
                     "octree_grid_mix": 0.5,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
                     "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
-                    "heightfield_interval_mix": 0.5,
+                    "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True,
                     "theta_subrange": 0.0, "max_depth": None, "threads": 0}
 
     def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
@@ -218,6 +218,8 @@ class Scene:
         ``heightfield_interval_mix`` (default 0.5) is the share of the choice of a theta interval
         made uniformly over the intervals, the rest proportional to their widths (0: widths only,
         whose per-sample derivatives have a heavy tail at slivers next to silhouettes);
+        ``heightfield_camera_every_interval`` (default True) traces a camera path through every
+        interval of a pixel's theta range (Eq. 5) instead of choosing one (Eq. 6);
         ``heightfield_reparam=False`` holds the split points fixed, which drops the visibility part
         of the derivative (a diagnostic, like ``spp_boundary=0``).
 

@@ -106,6 +106,7 @@ DiffOptions diff_options(const py::dict& options) {
     else if (k == "heightfield_curvature_test") o.heightfield.search.curvature_test = value.cast<bool>();
     else if (k == "heightfield_reparam") o.heightfield.reparameterize = value.cast<bool>();
     else if (k == "heightfield_interval_mix") o.heightfield.interval_uniform_share = value.cast<float>();
+    else if (k == "heightfield_camera_every_interval") o.heightfield.camera_every_interval = value.cast<bool>();
     else if (k == "theta_subrange") o.heightfield.theta_subrange_degrees = value.cast<float>();
     else throw std::invalid_argument("unknown derivative option '" + k + "'");
   }

@@ -197,7 +197,10 @@ struct HeightfieldPath {
   // range ends at the steepest peak, above which no ray meets the field; when the field blocks
   // the whole range the sample is 0 without a ray. The dropped part's integral is 0 for every
   // value of the parameters, so this only removes zero-valued samples.
-  bool sample_theta(const Origin& o, const Var& phi, Var lo, Var hi, Var& theta, Var& weight, bool visible_only = false) {
+  // every != nullptr: every interval instead of one (Eq. 5), all at one uniform position, as
+  // (theta, weight) pairs; theta and weight are then not set.
+  bool sample_theta(const Origin& o, const Var& phi, Var lo, Var hi, Var& theta, Var& weight, bool visible_only = false,
+                    std::vector<std::pair<Var, Var>>* every = nullptr) {
     if (!(hi.v > lo.v)) return false;
     double inv_p = 1.0;  // 1 / probability of the sub-range
     if (E.m_opt.theta_subrange_degrees > 0.0f) {  // App. C: search one sub-range only
@@ -237,6 +240,14 @@ struct HeightfieldPath {
     cut.push_back({hi.v, hi});
     if (!E.m_opt.reparameterize)
       for (Split& c : cut) c.var = Var(c.v);
+    if (every) {
+      const Var u(double(rng.next_float()));
+      for (size_t j = 0; j + 1 < cut.size(); ++j) {
+        const Var width = cut[j + 1].var - cut[j].var;
+        every->push_back({cut[j].var + width * u, Var(inv_p) * width});
+      }
+      return true;
+    }
     const IntervalChoice ch = choose_interval(cut, E.m_opt.interval_uniform_share, double(rng.next_float()));
     if (!(cut[ch.j + 1].v > cut[ch.j].v) || !(ch.p > 0.0)) return false;
     const Var width = cut[ch.j + 1].var - cut[ch.j].var;
@@ -451,12 +462,23 @@ struct HeightfieldPath {
       if (beta >= 0.0) t_hi = std::min(t_hi, kPiD - beta);
       else t_lo = std::max(t_lo, -beta);
     }
-    Var theta, w_theta;
     const Var phi(phi0);
-    if (!(t_hi > t_lo) || !sample_theta(o, phi, Var(t_lo), Var(t_hi), theta, w_theta)) {
+    std::vector<std::pair<Var, Var>> dirs;  // (theta, 1 / pdf of theta)
+    Var theta, w_theta;
+    const bool every = E.m_opt.camera_every_interval;
+    if (!(t_hi > t_lo) || !sample_theta(o, phi, Var(t_lo), Var(t_hi), theta, w_theta, false, every ? &dirs : nullptr)) {
       ++cnt.empty_ranges;
       return VV();
     }
+    if (!every) dirs.push_back({theta, w_theta});
+    VV L;
+    for (const auto& [th, w_th] : dirs) L = L + camera_path(eye, phi, th, w_th * Var(phi_hi - phi_lo));
+    return L;
+  }
+
+  // The path along the camera direction (phi, theta); weight = 1 / pdf(phi, theta).
+  VV camera_path(const Vec3& eye, const Var& phi, const Var& theta, const Var& weight) {
+    const Camera& cam = scene.camera;
     const VV w = world_direction(phi, theta);
     const Vec3 w0(float(w.x.v), float(w.y.v), float(w.z.v));
     // Film area per solid angle, K_x K_y / cos^3 (angle to the optical axis).
@@ -465,7 +487,7 @@ struct HeightfieldPath {
     if (!(cos_a.v > 0.0)) return VV();
     const double Kx = 0.5 * cam.width / cam.tan_half_x, Ky = 0.5 * cam.height / cam.tan_half_y;
     VV beta = VV(Var(1.0), Var(1.0), Var(1.0)) *
-              (Var(Kx * Ky) / (cos_a * cos_a * cos_a) * sin(theta) * Var(phi_hi - phi_lo) * w_theta);
+              (Var(Kx * Ky) / (cos_a * cos_a * cos_a) * sin(theta) * weight);
     const Ray ray{eye, w0, cam.near_clip / float(cos_a.v), cam.far_clip / float(cos_a.v)};
     SurfaceInteraction si;
     ++cnt.rays;
