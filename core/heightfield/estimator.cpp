@@ -191,8 +191,8 @@ struct HeightfieldPath {
   }
 
   // Samples theta in [lo, hi] for the slice at azimuth phi (Eq. 10-11): split at the peaks (and at
-  // every emitter edge), choose the interval holding a uniform primal theta and map linearly
-  // between its taped end points. weight = 1 / pdf(theta) with the end points' motion in it.
+  // every emitter edge), choose one interval (choose_interval) and map linearly between its
+  // taped end points. weight = 1 / pdf(theta) with the end points' motion in it.
   // visible_only (emitter sampling, where a ray that meets the field contributes nothing): the
   // range ends at the steepest peak, above which no ray meets the field; when the field blocks
   // the whole range the sample is 0 without a ray. The dropped part's integral is 0 for every

@@ -4,7 +4,8 @@
 // heightfield's up axis: an azimuth phi, then theta in the theta-range of the domain (pixel, area
 // emitter, or the hemisphere above the local tangent plane). The range is split at every
 // discontinuity along that vertical slice (peak_search.h, emitter edges, footprint edges); the
-// interval holding a uniform primal theta is chosen and theta is the linear map of its end points,
+// camera traces every interval, other vertices choose one (by width with a uniform share, which
+// bounds the reciprocal pdf at slivers), and theta is the linear map of the interval's end points,
 // which are taped functions of the heights, so their motion enters through the reciprocal pdf and
 // no boundary integral is needed. Vertices reached along these directions slide on their ray.
 //
@@ -33,7 +34,7 @@ struct HeightfieldOptions {
   // only the continuous part of the derivative: for tests that show what the reparameterisation adds.
   bool reparameterize = true;
   // Share of the interval choice made uniformly over the intervals (the rest is proportional to
-  // their widths); see sample_theta in estimator.cpp.
+  // their widths); see choose_interval in estimator.cpp.
   float interval_uniform_share = 0.5f;
   // Camera rays: trace every interval of the pixel's theta range (Eq. 5, one path each) instead of
   // choosing one (Eq. 6). Only pixels holding a split cost more (a path per interval); on the cone
