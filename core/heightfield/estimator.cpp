@@ -25,6 +25,9 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
                                            int max_depth)
     : m_scene(scene), m_params(params), m_opt(options), m_max_depth(max_depth) {
   const std::string where = scene.source + ": heightfield estimator: ";
+  if (!(options.interval_uniform_share >= 0.0f && options.interval_uniform_share <= 1.0f))
+    throw std::invalid_argument(where + "interval_uniform_share must be in [0, 1] (got " +
+                                std::to_string(options.interval_uniform_share) + ")");
   for (size_t i = 0; i < scene.shapes.size(); ++i) {
     const Shape& s = scene.shapes[i];
     if (s.is_heightfield()) {
@@ -299,14 +302,17 @@ struct HeightfieldPath {
           double off = a.v - ref;
           while (off > kPiD) off -= 2.0 * kPiD;
           while (off <= -kPiD) off += 2.0 * kPiD;
-          v_az.push_back({off, a + Var(ref + off - a.v)});  // the same angle, unwrapped next to ref
+          // .v: the offset from ref (only differences are used); .var: the same angle, unwrapped next to ref
+          v_az.push_back({off, a + Var(ref + off - a.v)});
         }
       std::sort(v_az.begin(), v_az.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
       if (v_az.back().v - v_az.front().v < kPiD) {
         az.assign(1, v_az.front());
         for (const Split& s : v_az)
           if (s.v > az.back().v) az.push_back(s);  // shared vertices appear once
-        if (az.size() < 2) return VV();           // a degenerate emitter seen edge-on
+        // Vertices at exactly one primal azimuth (an edge exactly radial, an emitter seen exactly
+        // edge-on) merge; their azimuths' motion is then dropped, for a measure-zero set of origins.
+        if (az.size() < 2) return VV();
       }
     }
     const IntervalChoice ch = choose_interval(az, kAzimuthUniformShare, double(u_phi));
@@ -463,7 +469,7 @@ struct HeightfieldPath {
       else t_lo = std::max(t_lo, -beta);
     }
     const Var phi(phi0);
-    std::vector<std::pair<Var, Var>> dirs;  // (theta, 1 / pdf of theta)
+    std::vector<std::pair<Var, Var>> dirs;  // (theta, its weight: 1 / pdf, or the Jacobian under Eq. 5)
     Var theta, w_theta;
     const bool every = E.m_opt.camera_every_interval;
     if (!(t_hi > t_lo) || !sample_theta(o, phi, Var(t_lo), Var(t_hi), theta, w_theta, false, every ? &dirs : nullptr)) {
@@ -476,7 +482,8 @@ struct HeightfieldPath {
     return L;
   }
 
-  // The path along the camera direction (phi, theta); weight = 1 / pdf(phi, theta).
+  // The path along the camera direction (phi, theta); weight: 1 / pdf(phi, theta), or the
+  // Jacobian of (u_phi, u_theta) -> (phi, theta) when every interval is traced.
   VV camera_path(const Vec3& eye, const Var& phi, const Var& theta, const Var& weight) {
     const Camera& cam = scene.camera;
     const VV w = world_direction(phi, theta);

@@ -4,8 +4,9 @@
 // heightfield's up axis: an azimuth phi, then theta in the theta-range of the domain (pixel, area
 // emitter, or the hemisphere above the local tangent plane). The range is split at every
 // discontinuity along that vertical slice (peak_search.h, emitter edges, footprint edges); the
-// camera traces every interval, other vertices choose one (by width with a uniform share, which
-// bounds the reciprocal pdf at slivers), and theta is the linear map of the interval's end points,
+// camera traces every interval (camera_every_interval), other vertices choose one (by width with a
+// uniform share, which bounds the reciprocal pdf at slivers); theta is the linear map of the
+// interval's end points,
 // which are taped functions of the heights, so their motion enters through the reciprocal pdf and
 // no boundary integral is needed. Vertices reached along these directions slide on their ray.
 //
