@@ -76,6 +76,8 @@ struct Split {
   Var var;
 };
 
+bool by_value(const Split& a, const Split& b) { return a.v < b.v; }
+
 // Slope of the direction with zenith angle theta (k = cot theta), clamped away from infinity.
 double slope_of(double theta) {
   const double s = std::sin(theta), c = std::cos(theta);
@@ -237,7 +239,7 @@ struct HeightfieldPath {
     // The intervals of (lo, hi), end points sorted by primal value; coinciding splits are merged
     // (an interval of zero width holds no sample).
     std::vector<Split> cut{{lo.v, lo}};
-    std::sort(splits.begin(), splits.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
+    std::sort(splits.begin(), splits.end(), by_value);
     for (const Split& s : splits)
       if (s.v > cut.back().v && s.v < hi.v) cut.push_back(s);
     cut.push_back({hi.v, hi});
@@ -251,8 +253,8 @@ struct HeightfieldPath {
       }
       return true;
     }
+    // Every interval has a positive width (strict merge above), so p_j > 0.
     const IntervalChoice ch = choose_interval(cut, E.m_opt.interval_uniform_share, double(rng.next_float()));
-    if (!(cut[ch.j + 1].v > cut[ch.j].v) || !(ch.p > 0.0)) return false;
     const Var width = cut[ch.j + 1].var - cut[ch.j].var;
     theta = cut[ch.j].var + width * Var(ch.u);
     weight = Var(inv_p / ch.p) * width;
@@ -305,7 +307,7 @@ struct HeightfieldPath {
           // .v: the offset from ref (only differences are used); .var: the same angle, unwrapped next to ref
           v_az.push_back({off, a + Var(ref + off - a.v)});
         }
-      std::sort(v_az.begin(), v_az.end(), [](const Split& a, const Split& b) { return a.v < b.v; });
+      std::sort(v_az.begin(), v_az.end(), by_value);
       if (v_az.back().v - v_az.front().v < kPiD) {
         az.assign(1, v_az.front());
         for (const Split& s : v_az)
