@@ -120,7 +120,7 @@ class Scene:
     DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "guiding_spp": 4,
                     "guiding_seeds": None,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
-                    "octree_grid_mix": 0.5,
+                    "octree_grid_mix": 0.5, "octree_training": 512,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
                     "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
                     "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True,
@@ -145,6 +145,8 @@ class Scene:
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
+        if int(opts["octree_training"]) < 0:
+            raise ValueError(f"octree_training must be >= 0 (got {opts['octree_training']})")
         for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples"):
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")

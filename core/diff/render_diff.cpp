@@ -74,6 +74,8 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
   parse_seed_segments(opt.project_seed, scene.source);
   if (!(opt.octree_grid_mix >= 0.0f && opt.octree_grid_mix < 1.0f))
     throw std::invalid_argument(scene.source + ": octree_grid_mix must be in [0, 1) (got " + std::to_string(opt.octree_grid_mix) + ")");
+  if (opt.octree_training < 0)
+    throw std::invalid_argument(scene.source + ": octree_training must be >= 0 (got " + std::to_string(opt.octree_training) + ")");
   if (opt.guiding_spp < 1 || opt.guiding_seeds < 0)
     throw std::invalid_argument(scene.source + ": guiding_spp must be >= 1 and guiding_seeds >= 0 (0: the guide's default)");
   if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
@@ -243,6 +245,48 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 }
 
 
+// The octree's training round (iterative guiding in the manner of Muller et al. 2017's practical
+// path guiding; not in the projective-sampling paper): `octree_training` samples per pixel drawn
+// from the projective grid and the integrand evaluated at each. A sample whose weight f / g is at
+// least kTrainingSelect times the mean weight lies where the grid has less than 1 / kTrainingSelect
+// of the density proportional to f: typically on the stretches of a narrow feature between the
+// projections, which the octree's leaves there would otherwise estimate as empty from a few
+// uniform points. Those samples join the projections as points the octree splits at and whose
+// values count in their leaves' masses. Measured in docs/reports/projective/README.md.
+constexpr double kTrainingSelect = 2.0;
+
+template <typename Integrand>
+void add_training_points(const Scene& scene, const DiffOptions& opt, const Integrand& integrand, const BoundaryGuide& first,
+                         std::vector<Vec3>& points, std::vector<float>& values, tbb::task_arena& arena, std::string& origin) {
+  const uint64_t n = uint64_t(opt.octree_training) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+  std::vector<Vec3> drawn(n);
+  std::vector<float> value(n, 0.0f), pdf(n, 0.0f);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1024), [&](const tbb::blocked_range<uint64_t>& r) {
+      for (uint64_t i = r.begin(); i != r.end(); ++i) {
+        Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ 0x747261696e696e67ULL), i);
+        drawn[i] = first.sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf[i]);
+        value[i] = integrand(drawn[i]);
+      }
+    });
+  });
+  auto valid = [&](uint64_t i) { return std::isfinite(value[i]) && value[i] > 0.0f && pdf[i] > 0.0f; };
+  double mean_weight = 0.0;
+  for (uint64_t i = 0; i < n; ++i)
+    if (valid(i)) mean_weight += double(value[i]) / pdf[i] / double(n);
+  size_t valued = 0, kept = 0;
+  for (uint64_t i = 0; i < n; ++i) {
+    if (!valid(i)) continue;
+    ++valued;
+    if (double(value[i]) / pdf[i] < kTrainingSelect * mean_weight) continue;
+    points.push_back(drawn[i]);
+    values.push_back(value[i]);
+    ++kept;
+  }
+  origin += "; trained with " + std::to_string(n) + " samples of the projective grid (" + std::to_string(valued) +
+            " of non-zero value, " + std::to_string(kept) + " under-sampled ones added to the octree's points)";
+}
+
 // The guiding distribution of the indirect term for this call: the path-space baseline grid
 // (random points per cell), or projected seeds into a grid (their integrand values) or an octree
 // (their positions; leaf masses from uniform samples), by default mixed with the projective grid.
@@ -276,13 +320,15 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
       for (size_t i = r.begin(); i != r.end(); ++i) values[i] = integrand(points[i]);
     });
   });
+  auto grid = std::make_shared<BoundaryGrid>(res, points, values);
   if (opt.guiding == "grid") {
-    terms.guide = std::make_shared<BoundaryGrid>(res, points, values);
+    terms.guide = grid;
     return;
   }
+  if (opt.octree_training > 0) add_training_points(scene, opt, integrand, *grid, points, values, arena, terms.guide_origin);
   auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values);
   if (opt.octree_grid_mix > 0.0f)
-    terms.guide = std::make_shared<GuideMixture>(octree, std::make_shared<BoundaryGrid>(res, points, values), opt.octree_grid_mix);
+    terms.guide = std::make_shared<GuideMixture>(octree, grid, opt.octree_grid_mix);
   else
     terms.guide = octree;
 }
@@ -318,7 +364,8 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
                           std::to_string(opt.grid_resolution) + "|" + std::to_string(opt.guiding_spp) + "|" +
                           std::to_string(seeds_per_pixel(opt)) + "|" +
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
-                          std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "|" +
+                          std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "," +
+                          std::to_string(opt.octree_grid_mix) + "," + std::to_string(opt.octree_training) + "|" +
                           std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);
   float extent = 0.0f;
   const std::vector<float> geometry = moving_geometry(scene, params, extent);

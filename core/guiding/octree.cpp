@@ -10,72 +10,32 @@
 
 namespace limn {
 
-BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& opt, uint64_t seed, int threads,
-                               const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values)
-    : m_opt(opt), m_valued(!values.empty()) {
+namespace {
+
+void check_options(const OctreeOptions& opt) {
   if (opt.slices < 1 || opt.slices > 1 << 16) throw std::invalid_argument("octree guiding: slices must be in [1, 65536] (got " + std::to_string(opt.slices) + ")");
   if (opt.max_depth < 0 || opt.max_depth > 12) throw std::invalid_argument("octree guiding: max_depth must be in [0, 12] (got " + std::to_string(opt.max_depth) + ")");
   if (opt.leaf_samples < 1) throw std::invalid_argument("octree guiding: leaf_samples must be >= 1 (got " + std::to_string(opt.leaf_samples) + ")");
+  if (opt.max_leaves < size_t(opt.slices)) throw std::invalid_argument("octree guiding: max_leaves must be >= slices");
+}
+
+bool inside_unit_cube(const Vec3& p) { return p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f && p.z >= 0.0f && p.z < 1.0f; }
+
+}  // namespace
+
+BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& opt, uint64_t seed, int threads,
+                               const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values)
+    : m_opt(opt), m_valued(!values.empty()) {
+  check_options(opt);
   if (!values.empty() && values.size() != points.size())
     throw std::invalid_argument("octree guiding: " + std::to_string(values.size()) + " values for " + std::to_string(points.size()) + " points");
-  if (opt.max_leaves < size_t(opt.slices)) throw std::invalid_argument("octree guiding: max_leaves must be >= slices");
-
-  // Bottom-up partition, breadth first so that a leaf budget coarsens evenly.
-  struct Pending {
-    int node, depth;
-    Vec3 lo, size;
-    std::vector<uint32_t> idx;
-  };
-  const int S = opt.slices;
-  m_nodes.resize(size_t(S));
-  std::deque<Pending> queue;
-  std::vector<std::vector<uint32_t>> by_slice(static_cast<size_t>(S));
-  for (size_t i = 0; i < points.size(); ++i) {
-    const Vec3& p = points[i];
-    if (!(p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f && p.z >= 0.0f && p.z < 1.0f)) continue;
-    // Projections where the integrand is zero (a silhouette no path observes) mark no feature:
-    // they would only split empty space (section 5.1.2 builds on "samples concentrated at the
-    // sparse features"; Mitsuba's prb_projective keeps points of non-zero mass likewise).
-    if (!values.empty() && !(std::isfinite(values[i]) && values[i] > 0.0f)) continue;
-    by_slice[size_t(std::min(int(p.x * S), S - 1))].push_back(uint32_t(i));
-    ++m_splitting;
-  }
-  for (int s = 0; s < S; ++s) queue.push_back({s, 0, Vec3(float(s) / S, 0.0f, 0.0f), Vec3(1.0f / S, 1.0f, 1.0f), std::move(by_slice[size_t(s)])});
-  size_t leaves = size_t(S);
-  int deepest = 0;
-  std::vector<std::pair<int, Leaf>> leaf_nodes;
-  std::vector<std::vector<uint32_t>> leaf_points;  // the projected points each leaf holds
-  while (!queue.empty()) {
-    Pending n = std::move(queue.front());
-    queue.pop_front();
-    const bool split = n.idx.size() > 1 && n.depth < opt.max_depth;
-    if (split && leaves + 7 > opt.max_leaves) m_coarsened = true;
-    if (!split || leaves + 7 > opt.max_leaves) {
-      leaf_nodes.push_back({n.node, Leaf{n.lo, n.size}});
-      leaf_points.push_back(std::move(n.idx));
-      deepest = std::max(deepest, n.depth);
-      continue;
-    }
-    leaves += 7;
-    const int first = int(m_nodes.size());
-    m_nodes[size_t(n.node)].child = first;
-    m_nodes.resize(m_nodes.size() + 8);
-    const Vec3 half = 0.5f * n.size, mid = n.lo + half;
-    std::vector<uint32_t> parts[8];
-    for (uint32_t i : n.idx) {
-      const Vec3& p = points[i];
-      parts[(p.x >= mid.x ? 1 : 0) | (p.y >= mid.y ? 2 : 0) | (p.z >= mid.z ? 4 : 0)].push_back(i);
-    }
-    for (int c = 0; c < 8; ++c) {
-      const Vec3 lo(c & 1 ? mid.x : n.lo.x, c & 2 ? mid.y : n.lo.y, c & 4 ? mid.z : n.lo.z);
-      queue.push_back({first + c, n.depth + 1, lo, half, std::move(parts[c])});
-    }
-  }
-  m_leaves.reserve(leaf_nodes.size());
-  for (auto& [node, leaf] : leaf_nodes) {
-    m_nodes[size_t(node)].leaf = int(m_leaves.size());
-    m_leaves.push_back(leaf);
-  }
+  // Projections where the integrand is zero (a silhouette no path observes) mark no feature:
+  // they would only split empty space (section 5.1.2 builds on "samples concentrated at the
+  // sparse features"; Mitsuba's prb_projective keeps points of non-zero mass likewise).
+  std::vector<uint32_t> splitting;
+  for (size_t i = 0; i < points.size(); ++i)
+    if (inside_unit_cube(points[i]) && (values.empty() || (std::isfinite(values[i]) && values[i] > 0.0f))) splitting.push_back(uint32_t(i));
+  const std::vector<std::vector<uint32_t>> leaf_points = partition(points, splitting);
 
   // Leaf masses from uniform points inside each leaf.
   std::vector<double> mass(m_leaves.size(), 0.0);
@@ -101,6 +61,62 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
       }
     });
   });
+  finish(mass);
+}
+
+std::vector<std::vector<uint32_t>> BoundaryOctree::partition(const std::vector<Vec3>& points, const std::vector<uint32_t>& splitting) {
+  // Bottom-up partition, breadth first so that a leaf budget coarsens evenly.
+  struct Pending {
+    int node, depth;
+    Vec3 lo, size;
+    std::vector<uint32_t> idx;
+  };
+  const int S = m_opt.slices;
+  m_nodes.resize(size_t(S));
+  std::deque<Pending> queue;
+  std::vector<std::vector<uint32_t>> by_slice(static_cast<size_t>(S));
+  for (uint32_t i : splitting) by_slice[size_t(std::min(int(points[i].x * S), S - 1))].push_back(i);
+  m_splitting = splitting.size();
+  for (int s = 0; s < S; ++s) queue.push_back({s, 0, Vec3(float(s) / S, 0.0f, 0.0f), Vec3(1.0f / S, 1.0f, 1.0f), std::move(by_slice[size_t(s)])});
+  size_t leaves = size_t(S);
+  m_deepest = 0;
+  std::vector<std::pair<int, Leaf>> leaf_nodes;
+  std::vector<std::vector<uint32_t>> leaf_points;  // the points each leaf holds
+  while (!queue.empty()) {
+    Pending n = std::move(queue.front());
+    queue.pop_front();
+    const bool split = n.idx.size() > 1 && n.depth < m_opt.max_depth;
+    if (split && leaves + 7 > m_opt.max_leaves) m_coarsened = true;
+    if (!split || leaves + 7 > m_opt.max_leaves) {
+      leaf_nodes.push_back({n.node, Leaf{n.lo, n.size}});
+      leaf_points.push_back(std::move(n.idx));
+      m_deepest = std::max(m_deepest, n.depth);
+      continue;
+    }
+    leaves += 7;
+    const int first = int(m_nodes.size());
+    m_nodes[size_t(n.node)].child = first;
+    m_nodes.resize(m_nodes.size() + 8);
+    const Vec3 half = 0.5f * n.size, mid = n.lo + half;
+    std::vector<uint32_t> parts[8];
+    for (uint32_t i : n.idx) {
+      const Vec3& p = points[i];
+      parts[(p.x >= mid.x ? 1 : 0) | (p.y >= mid.y ? 2 : 0) | (p.z >= mid.z ? 4 : 0)].push_back(i);
+    }
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 lo(c & 1 ? mid.x : n.lo.x, c & 2 ? mid.y : n.lo.y, c & 4 ? mid.z : n.lo.z);
+      queue.push_back({first + c, n.depth + 1, lo, half, std::move(parts[c])});
+    }
+  }
+  m_leaves.reserve(leaf_nodes.size());
+  for (auto& [node, leaf] : leaf_nodes) {
+    m_nodes[size_t(node)].leaf = int(m_leaves.size());
+    m_leaves.push_back(leaf);
+  }
+  return leaf_points;
+}
+
+void BoundaryOctree::finish(const std::vector<double>& mass) {
   double total = 0.0;
   for (double m : mass) {
     total += m;
@@ -109,13 +125,13 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   m_prob.resize(m_leaves.size());
   for (size_t l = 0; l < m_leaves.size(); ++l) {
     const double volume = double(m_leaves[l].size.x) * m_leaves[l].size.y * m_leaves[l].size.z;
-    m_prob[l] = float(total > 0.0 ? (1.0 - opt.defensive) * mass[l] / total + opt.defensive * volume : volume);
+    m_prob[l] = float(total > 0.0 ? (1.0 - m_opt.defensive) * mass[l] / total + m_opt.defensive * volume : volume);
   }
   m_select = Distribution1D(m_prob);
 
   // Marginal density of the first coordinate on the finest slab subdivision (a difference array:
   // every leaf adds prob / width over the bins it spans).
-  const size_t bins = size_t(S) << deepest;
+  const size_t bins = size_t(m_opt.slices) << m_deepest;
   std::vector<double> diff(bins + 1, 0.0);
   for (size_t l = 0; l < m_leaves.size(); ++l) {
     const size_t b0 = size_t(std::llround(double(m_leaves[l].lo.x) * bins));
@@ -177,7 +193,7 @@ size_t BoundaryOctree::memory_bytes() const {
 
 std::string BoundaryOctree::describe() const {
   return "octree " + std::to_string(m_opt.slices) + " slices split at " + std::to_string(m_splitting) +
-         (m_valued ? " projections of non-zero value, " : " points, ") + std::to_string(m_leaves.size()) + " leaves (" +
+         (m_valued ? " points of non-zero value, " : " points, ") + std::to_string(m_leaves.size()) + " leaves (" +
          std::to_string(m_empty) + " empty), depth <= " + std::to_string(m_opt.max_depth) + ", " +
          std::to_string(m_opt.leaf_samples) + " uniform samples per leaf" +
          (m_coarsened ? ", COARSENED at the leaf budget (max_leaves " + std::to_string(m_opt.max_leaves) + ")" : "");

@@ -59,6 +59,10 @@ class BoundaryOctree : public BoundaryGuide {
     Vec3 lo, size;
   };
   int leaf_at(const Vec3& p) const;
+  // Splits the slabs at points[splitting] (fills m_nodes, m_leaves); the points each leaf holds.
+  std::vector<std::vector<uint32_t>> partition(const std::vector<Vec3>& points, const std::vector<uint32_t>& splitting);
+  // Leaf probabilities from masses (with the defensive share) and the first coordinate's marginal.
+  void finish(const std::vector<double>& mass);
 
   OctreeOptions m_opt;
   std::vector<Node> m_nodes;       // the first `slices` nodes are the slab roots
@@ -70,6 +74,7 @@ class BoundaryOctree : public BoundaryGuide {
   size_t m_splitting = 0;  // points that took part in the partition
   bool m_valued = false;   // built with values (only non-zero ones split)
   bool m_coarsened = false;
+  int m_deepest = 0;
 };
 
 }  // namespace limn
