@@ -23,7 +23,8 @@ METHODS = {
     "grid": {"guiding": "grid", "projective": False},              # path-space baseline, 4 points per cell
     "grid10x": {"guiding": "grid", "projective": False, "guiding_spp": 40},
     "projective_grid": {"guiding": "grid", "projective": True},
-    "octree": {"guiding": "octree"},
+    "octree_untrained": {"guiding": "octree", "octree_training": 0},   # the paper's octree: projections only
+    "octree": {"guiding": "octree"},                                  # with the training round
 }
 
 
@@ -87,7 +88,8 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
              f"budget = samples per pixel for every term computed. {runs} run(s) per row on a shared 2-core machine "
              f"(seeds differ); time includes building the guide.", "",
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
-             "random points per cell; `projective_grid` and `octree` filled from projected seeds.", "",
+             "random points per cell; `projective_grid` and `octree` filled from projected seeds (`octree_untrained`: "
+             "from the projections alone, as in the paper; `octree`: with the training round's points too).", "",
              "| method | budget (spp) | time (s) | guide set-up (s) | relative RMSE | worst run | relative MAE |",
              "|---|---|---|---|---|---|---|"]
     for m, b, sec, rmse, mae, guide, worst in rows:
