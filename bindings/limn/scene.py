@@ -196,7 +196,11 @@ class Scene:
           (``octree_grid_mix``, its share, default 0.5; 0: the octree alone). The grid covers the
           parts of a narrow feature next to the points that were found, which the octree's leaves
           there estimate as empty; without it the octree's errors are heavy-tailed (see
-          docs/reports/projective/README.md).
+          docs/reports/projective/README.md). ``octree_training`` (default 512) samples per pixel
+          are first drawn from that grid; those whose weight f / g is at least twice the mean
+          (where the grid under-samples the integrand) join the projections as points the octree
+          splits at (a training round in the manner of practical path guiding, not in the paper;
+          0: projections only, as in the paper).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose

@@ -9,6 +9,8 @@
 // narrower than its feature would otherwise often miss it with a few uniform points), and leaves
 // are sampled in proportion to it, mixed with a defensive uniform component. Renders sample it
 // in a GuideMixture with the projective grid (core/guiding/mixture.h, DiffOptions::octree_grid_mix).
+// The points are the projections and, after the training round (DiffOptions::octree_training),
+// samples of that grid where it under-samples the integrand; the tree treats both alike.
 //
 // Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
 // (coarsened(), said in the summary), never dropping samples or the boundary term.
