@@ -1,0 +1,60 @@
+"""Equal-time gains of the projective-sampling guides, from the bench reports of the paper's test
+scene: `.venv/bin/python tests/bench/projective_summary.py [--budget 1024] [--dir docs/reports/projective]`.
+
+Reads the tables that `python3 -m limn bench scenes/projective/<scene>.json ...` wrote and prints,
+per scene and as a geometric mean, the equal-time error ratios the paper reports (Figure 1:
+projection over the path-space baseline grid, 8.1x; the octree over the projective grid, a
+further 2.7x). Each error is scaled to a common time by error ~ time^-1/2 (independent samples;
+the guide's set-up is part of the time) before the ratio is taken."""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+
+SCENES = ["sphere", "torus", "cube_hole", "bunny"]
+# (label, slower method, faster method): ratio = error of the first / error of the second at equal time.
+STEPS = [("projective grid over the baseline grid 1x", "grid", "projective_grid"),
+         ("projective grid over the baseline grid 10x", "grid10x", "projective_grid"),
+         ("octree, projections only, over the projective grid", "projective_grid", "octree_untrained"),
+         ("octree with the training round over the projective grid", "projective_grid", "octree"),
+         ("octree with the training round over the baseline grid 1x", "grid", "octree")]
+
+
+def read_rows(path: str) -> dict[tuple[str, int], tuple[float, float]]:
+    """{(method, budget): (time, relative RMSE)} from a bench report's table."""
+    rows = {}
+    with open(path) as f:
+        for line in f:
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if len(cells) == 7 and cells[1].isdigit():
+                rows[(cells[0], int(cells[1]))] = (float(cells[2]), float(cells[4]))
+    return rows
+
+
+def equal_time_ratio(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Error of a over error of b once both are scaled to b's time (error ~ time^-1/2)."""
+    return a[1] * math.sqrt(a[0] / b[0]) / b[1]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--budget", type=int, default=1024, help="the rows (samples per pixel) to compare")
+    ap.add_argument("--dir", default=os.path.join("docs", "reports", "projective"))
+    args = ap.parse_args()
+    tables = {s: read_rows(os.path.join(args.dir, s + ".md")) for s in SCENES if os.path.exists(os.path.join(args.dir, s + ".md"))}
+    print(f"Equal-time gains at the {args.budget}-spp rows (error ratio after scaling by time^-1/2):\n")
+    print("| step | " + " | ".join(tables) + " | geometric mean |")
+    print("|---|" + "---|" * (len(tables) + 1))
+    for label, slow, fast in STEPS:
+        ratios = []
+        for rows in tables.values():
+            a, b = rows.get((slow, args.budget)), rows.get((fast, args.budget))
+            ratios.append(equal_time_ratio(a, b) if a and b else float("nan"))
+        valid = [r for r in ratios if r == r]
+        gm = math.exp(sum(math.log(r) for r in valid) / len(valid)) if valid else float("nan")
+        print(f"| {label} | " + " | ".join(f"{r:.1f}x" if r == r else "n/a" for r in ratios) + (f" | {gm:.1f}x |" if gm == gm else " | n/a |"))
+
+
+if __name__ == "__main__":
+    main()
