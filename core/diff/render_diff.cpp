@@ -251,13 +251,14 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 // least kTrainingSelect times the mean weight lies where the grid has less than 1 / kTrainingSelect
 // of the density proportional to f: typically on the stretches of a narrow feature between the
 // projections, which the octree's leaves there would otherwise estimate as empty from a few
-// uniform points. Those samples join the projections as points the octree splits at and whose
-// values count in their leaves' masses. Measured in docs/reports/projective/README.md.
+// uniform points. Those samples join the projections as points the octree splits at; their values
+// stay out of the leaf masses (they were chosen for being large). Measured in
+// docs/reports/projective/README.md.
 constexpr double kTrainingSelect = 2.0;
 
 template <typename Integrand>
-void add_training_points(const Scene& scene, const DiffOptions& opt, const Integrand& integrand, const BoundaryGuide& first,
-                         std::vector<Vec3>& points, std::vector<float>& values, tbb::task_arena& arena, std::string& origin) {
+std::vector<Vec3> training_points(const Scene& scene, const DiffOptions& opt, const Integrand& integrand, const BoundaryGuide& first,
+                                  tbb::task_arena& arena, std::string& origin) {
   const uint64_t n = uint64_t(opt.octree_training) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
   std::vector<Vec3> drawn(n);
   std::vector<float> value(n, 0.0f), pdf(n, 0.0f);
@@ -274,17 +275,16 @@ void add_training_points(const Scene& scene, const DiffOptions& opt, const Integ
   double mean_weight = 0.0;
   for (uint64_t i = 0; i < n; ++i)
     if (valid(i)) mean_weight += double(value[i]) / pdf[i] / double(n);
-  size_t valued = 0, kept = 0;
+  std::vector<Vec3> kept;
+  size_t valued = 0;
   for (uint64_t i = 0; i < n; ++i) {
     if (!valid(i)) continue;
     ++valued;
-    if (double(value[i]) / pdf[i] < kTrainingSelect * mean_weight) continue;
-    points.push_back(drawn[i]);
-    values.push_back(value[i]);
-    ++kept;
+    if (double(value[i]) / pdf[i] >= kTrainingSelect * mean_weight) kept.push_back(drawn[i]);
   }
   origin += "; trained with " + std::to_string(n) + " samples of the projective grid (" + std::to_string(valued) +
-            " of non-zero value, " + std::to_string(kept) + " under-sampled ones added to the octree's points)";
+            " of non-zero value, " + std::to_string(kept.size()) + " under-sampled ones added to the octree's points)";
+  return kept;
 }
 
 // The guiding distribution of the indirect term for this call: the path-space baseline grid
@@ -325,8 +325,9 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
     terms.guide = grid;
     return;
   }
-  if (opt.octree_training > 0) add_training_points(scene, opt, integrand, *grid, points, values, arena, terms.guide_origin);
-  auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values);
+  const std::vector<Vec3> trained =
+      opt.octree_training > 0 ? training_points(scene, opt, integrand, *grid, arena, terms.guide_origin) : std::vector<Vec3>{};
+  auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values, trained);
   if (opt.octree_grid_mix > 0.0f)
     terms.guide = std::make_shared<GuideMixture>(octree, grid, opt.octree_grid_mix);
   else

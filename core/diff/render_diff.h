@@ -41,7 +41,7 @@ struct GuideCache {
 constexpr int kGridSeeds = 32;
 constexpr int kOctreeSeeds = 256;
 // Default training samples per pixel of the octree's training round (render_diff.cpp,
-// add_training_points; docs/reports/projective/README.md).
+// training_points; docs/reports/projective/README.md).
 constexpr int kOctreeTraining = 512;
 
 struct DiffOptions {
@@ -60,7 +60,7 @@ struct DiffOptions {
   // sampling mixture (core/guiding/mixture.h); 0 samples the octree alone.
   float octree_grid_mix = 0.5f;
   // Octree guiding: samples per pixel drawn from the projective grid whose under-sampled ones join
-  // the projections as the octree's points (render_diff.cpp, add_training_points); 0: projections only.
+  // the projections as the octree's points (render_diff.cpp, training_points); 0: projections only.
   int octree_training = kOctreeTraining;
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
   int guide_refresh = 0;              // rebuild after this many calls (0: every call)

@@ -24,7 +24,8 @@ bool inside_unit_cube(const Vec3& p) { return p.x >= 0.0f && p.x < 1.0f && p.y >
 }  // namespace
 
 BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& opt, uint64_t seed, int threads,
-                               const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values)
+                               const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values,
+                               const std::vector<Vec3>& split_only)
     : m_opt(opt), m_valued(!values.empty()) {
   check_options(opt);
   if (!values.empty() && values.size() != points.size())
@@ -32,10 +33,13 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   // Projections where the integrand is zero (a silhouette no path observes) mark no feature:
   // they would only split empty space (section 5.1.2 builds on "samples concentrated at the
   // sparse features"; Mitsuba's prb_projective keeps points of non-zero mass likewise).
+  std::vector<Vec3> all = points;
+  all.insert(all.end(), split_only.begin(), split_only.end());
   std::vector<uint32_t> splitting;
-  for (size_t i = 0; i < points.size(); ++i)
-    if (inside_unit_cube(points[i]) && (values.empty() || (std::isfinite(values[i]) && values[i] > 0.0f))) splitting.push_back(uint32_t(i));
-  const std::vector<std::vector<uint32_t>> leaf_points = partition(points, splitting);
+  for (size_t i = 0; i < all.size(); ++i)
+    if (inside_unit_cube(all[i]) && (i >= points.size() || values.empty() || (std::isfinite(values[i]) && values[i] > 0.0f)))
+      splitting.push_back(uint32_t(i));
+  const std::vector<std::vector<uint32_t>> leaf_points = partition(all, splitting);
 
   // Leaf masses from uniform points inside each leaf.
   std::vector<double> mass(m_leaves.size(), 0.0);
@@ -52,8 +56,8 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
           const float f = integrand(glm::min(p, Vec3(1.0f - 1e-7f)));
           if (std::isfinite(f) && f > 0.0f) sum += f;
         }
-        if (!values.empty())
-          for (uint32_t i : leaf_points[l]) {
+        for (uint32_t i : leaf_points[l])
+          if (i < values.size()) {  // split_only points add nothing
             sum += values[i];
             ++count;
           }

@@ -9,8 +9,9 @@
 // narrower than its feature would otherwise often miss it with a few uniform points), and leaves
 // are sampled in proportion to it, mixed with a defensive uniform component. Renders sample it
 // in a GuideMixture with the projective grid (core/guiding/mixture.h, DiffOptions::octree_grid_mix).
-// The points are the projections and, after the training round (DiffOptions::octree_training),
-// samples of that grid where it under-samples the integrand; the tree treats both alike.
+// `split_only` points take part in the partition but add nothing to the leaf masses: the
+// training round's samples (DiffOptions::octree_training), chosen where the projective grid
+// under-samples the integrand, i.e. biased towards large values that would inflate their leaves.
 //
 // Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
 // (coarsened(), said in the summary), never dropping samples or the boundary term.
@@ -35,7 +36,8 @@ class BoundaryOctree : public BoundaryGuide {
  public:
   // integrand(u) >= 0; called from several threads at once.
   BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& options, uint64_t seed, int threads,
-                 const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values = {});
+                 const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values = {},
+                 const std::vector<Vec3>& split_only = {});
 
   Vec3 sample(const Vec3& u, float* pdf) const override;
   float pdf(const Vec3& p) const override;
