@@ -196,3 +196,31 @@ TEST_CASE("octree mixed with the projective grid: a normalised mixture that cove
   CHECK_THROWS_AS(GuideMixture(octree, grid, 1.0f), std::invalid_argument);
   CHECK_THROWS_AS(GuideMixture(octree, nullptr, 0.5f), std::invalid_argument);
 }
+
+TEST_CASE("octree guiding: split-only points refine the partition and add nothing to the masses") {
+  // The training round's points (chosen for large weights) split like projections, but their
+  // values must not inflate their leaves: placed where the integrand is zero, their leaves keep
+  // the defensive density alone, and the tree stays a normalised density.
+  Pcg32 rng(21);
+  const auto pts = projected_points(2000, rng);
+  std::vector<float> values;
+  for (const Vec3& p : pts) values.push_back(sparse(p));
+  std::vector<Vec3> extra;
+  for (int i = 0; i < 300; ++i) extra.push_back(Vec3(0.05f, 0.9f, 0.9f) + 0.04f * Vec3(rng.next_float(), rng.next_float(), rng.next_float()));
+  OctreeOptions opt;
+  opt.slices = 16;
+  opt.max_depth = 7;
+  opt.leaf_samples = 4;
+  const BoundaryOctree plain(pts, opt, 5, 0, sparse, values);
+  const BoundaryOctree refined(pts, opt, 5, 0, sparse, values, extra);
+  CHECK(refined.leaf_count() > plain.leaf_count() + 300);
+  for (const Vec3& p : extra) {
+    const size_t l = refined.region_of(p);
+    const Box b = refined.region_box(l);
+    CHECK(refined.region_probability(l) == doctest::Approx(opt.defensive * double(b.size.x) * b.size.y * b.size.z).epsilon(1e-3));
+  }
+  CHECK(mean_pdf(refined, rng, 200000) == doctest::Approx(1.0).epsilon(0.03));
+  const auto [chi, q] = chi_square(refined, 200000, rng);
+  CHECK(chi < q);
+  CHECK(refined.describe().find("split at 2300 points") != std::string::npos);
+}
