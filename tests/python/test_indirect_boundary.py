@@ -279,7 +279,7 @@ def test_octree_training_round_lowers_the_error():
     the under-sampled ones join the projections as the octree's points) is said in the summary,
     0 switches it off, a negative count is refused, and on the paper's near-specular test scene it
     lowers the octree's error at equal boundary samples (measured here over 8 runs: 0.47 without,
-    0.25 with the default 512 per pixel; docs/reports/projective/README.md has the 48x48 scenes)."""
+    0.24 with the default 512 per pixel; docs/reports/projective/README.md has the 48x48 scenes)."""
     scene, name, t, ref, rms = near_specular_sphere()
 
     def guide_line(**kw):
@@ -306,7 +306,7 @@ def test_projective_guiding_beats_uniform_on_a_near_specular_reflection():
     """The projective-sampling paper's test scene (scenes/projective/sphere.json: a sphere seen
     only in a GGX alpha = 0.005 plane in front of a large emitter), at equal boundary samples: the
     projective grid and the octree must beat uniform sampling of the boundary sample space
-    (measured here over 6 runs: uniform 1.25, projective grid 0.50, octree 0.36 relative RMSE; at 48x48 the gap
+    (measured here over 6 runs: uniform 1.25, projective grid 0.50, octree 0.33 relative RMSE; at 48x48 the gap
     grows, docs/reports/projective/sphere.md)."""
     scene, name, t, ref, rms = near_specular_sphere()
 
