@@ -21,14 +21,15 @@ STEPS = [("projective grid over the baseline grid 1x", "grid", "projective_grid"
          ("octree with the training round over the baseline grid 1x", "grid", "octree")]
 
 
-def read_rows(path: str) -> dict[tuple[str, int], tuple[float, float]]:
-    """{(method, budget): (time, relative RMSE)} from a bench report's table."""
+def read_rows(path: str, column: int) -> dict[tuple[str, int], tuple[float, float]]:
+    """{(method, budget): (time, error)} from a bench report's table (column 4: relative RMSE,
+    the root mean square over the runs; 6: relative MAE, the mean over the runs)."""
     rows = {}
     with open(path) as f:
         for line in f:
             cells = [c.strip() for c in line.strip().strip("|").split("|")]
             if len(cells) == 7 and cells[1].isdigit():
-                rows[(cells[0], int(cells[1]))] = (float(cells[2]), float(cells[4]))
+                rows[(cells[0], int(cells[1]))] = (float(cells[2]), float(cells[column]))
     return rows
 
 
@@ -42,14 +43,20 @@ def main() -> None:
     ap.add_argument("--budget", type=int, default=1024, help="the rows (samples per pixel) to compare")
     ap.add_argument("--dir", default=os.path.join("docs", "reports", "projective"))
     args = ap.parse_args()
-    tables = {s: read_rows(os.path.join(args.dir, s + ".md")) for s in SCENES if os.path.exists(os.path.join(args.dir, s + ".md"))}
-    print(f"Equal-time gains at the {args.budget}-spp rows (error ratio after scaling by time^-1/2):\n")
-    print("| step | " + " | ".join(tables) + " | geometric mean |")
-    print("|---|" + "---|" * (len(tables) + 1))
+    for column, measure in ((4, "RMSE (L2; single outlier runs dominate it)"), (6, "MAE (L1)")):
+        tables = {s: read_rows(os.path.join(args.dir, s + ".md"), column) for s in SCENES if os.path.exists(os.path.join(args.dir, s + ".md"))}
+        print(f"Equal-time gains in relative {measure} at the {args.budget}-spp rows (error ratio after scaling by time^-1/2):\n")
+        print("| step | " + " | ".join(tables) + " | geometric mean |")
+        print("|---|" + "---|" * (len(tables) + 1))
+        print_steps(tables, args.budget)
+        print()
+
+
+def print_steps(tables: dict, budget: int) -> None:
     for label, slow, fast in STEPS:
         ratios = []
         for rows in tables.values():
-            a, b = rows.get((slow, args.budget)), rows.get((fast, args.budget))
+            a, b = rows.get((slow, budget)), rows.get((fast, budget))
             ratios.append(equal_time_ratio(a, b) if a and b else float("nan"))
         valid = [r for r in ratios if r == r]
         gm = math.exp(sum(math.log(r) for r in valid) / len(valid)) if valid else float("nan")
