@@ -251,14 +251,14 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 // least kTrainingSelect times the mean weight lies where the grid has less than 1 / kTrainingSelect
 // of the density proportional to f: typically on the stretches of a narrow feature between the
 // projections, which the octree's leaves there would otherwise estimate as empty from a few
-// uniform points. Those samples join the projections as points the octree splits at; their values
-// stay out of the leaf masses (they were chosen for being large). Measured in
+// uniform points. Those samples join the projections as points the octree splits at, each adding
+// its value over one finest cell to its leaf's mass (core/guiding/octree.h). Measured in
 // docs/reports/projective/README.md.
 constexpr double kTrainingSelect = 2.0;
 
 template <typename Integrand>
-std::vector<Vec3> training_points(const Scene& scene, const DiffOptions& opt, const Integrand& integrand, const BoundaryGuide& first,
-                                  tbb::task_arena& arena, std::string& origin) {
+void training_points(const Scene& scene, const DiffOptions& opt, const Integrand& integrand, const BoundaryGuide& first,
+                     tbb::task_arena& arena, std::vector<Vec3>& kept, std::vector<float>& kept_values, std::string& origin) {
   const uint64_t n = uint64_t(opt.octree_training) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
   std::vector<Vec3> drawn(n);
   std::vector<float> value(n, 0.0f), pdf(n, 0.0f);
@@ -275,16 +275,16 @@ std::vector<Vec3> training_points(const Scene& scene, const DiffOptions& opt, co
   double mean_weight = 0.0;
   for (uint64_t i = 0; i < n; ++i)
     if (valid(i)) mean_weight += double(value[i]) / pdf[i] / double(n);
-  std::vector<Vec3> kept;
   size_t valued = 0;
   for (uint64_t i = 0; i < n; ++i) {
     if (!valid(i)) continue;
     ++valued;
-    if (double(value[i]) / pdf[i] >= kTrainingSelect * mean_weight) kept.push_back(drawn[i]);
+    if (double(value[i]) / pdf[i] < kTrainingSelect * mean_weight) continue;
+    kept.push_back(drawn[i]);
+    kept_values.push_back(value[i]);
   }
   origin += "; trained with " + std::to_string(n) + " samples of the projective grid (" + std::to_string(valued) +
             " of non-zero value, " + std::to_string(kept.size()) + " under-sampled ones added to the octree's points)";
-  return kept;
 }
 
 // The guiding distribution of the indirect term for this call: the path-space baseline grid
@@ -325,9 +325,10 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
     terms.guide = grid;
     return;
   }
-  const std::vector<Vec3> trained =
-      opt.octree_training > 0 ? training_points(scene, opt, integrand, *grid, arena, terms.guide_origin) : std::vector<Vec3>{};
-  auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values, trained);
+  std::vector<Vec3> trained;
+  std::vector<float> trained_values;
+  if (opt.octree_training > 0) training_points(scene, opt, integrand, *grid, arena, trained, trained_values, terms.guide_origin);
+  auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values, trained, trained_values);
   if (opt.octree_grid_mix > 0.0f)
     terms.guide = std::make_shared<GuideMixture>(octree, grid, opt.octree_grid_mix);
   else

@@ -25,7 +25,7 @@ bool inside_unit_cube(const Vec3& p) { return p.x >= 0.0f && p.x < 1.0f && p.y >
 
 BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& opt, uint64_t seed, int threads,
                                const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values,
-                               const std::vector<Vec3>& split_only)
+                               const std::vector<Vec3>& trained, const std::vector<float>& trained_values)
     : m_opt(opt), m_valued(!values.empty()) {
   check_options(opt);
   if (!values.empty() && values.size() != points.size())
@@ -34,7 +34,9 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   // they would only split empty space (section 5.1.2 builds on "samples concentrated at the
   // sparse features"; Mitsuba's prb_projective keeps points of non-zero mass likewise).
   std::vector<Vec3> all = points;
-  all.insert(all.end(), split_only.begin(), split_only.end());
+  if (trained_values.size() != trained.size())
+    throw std::invalid_argument("octree guiding: " + std::to_string(trained_values.size()) + " values for " + std::to_string(trained.size()) + " trained points");
+  all.insert(all.end(), trained.begin(), trained.end());
   std::vector<uint32_t> splitting;
   for (size_t i = 0; i < all.size(); ++i)
     if (inside_unit_cube(all[i]) && (i >= points.size() || values.empty() || (std::isfinite(values[i]) && values[i] > 0.0f)))
@@ -42,6 +44,7 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   const std::vector<std::vector<uint32_t>> leaf_points = partition(all, splitting);
 
   // Leaf masses from uniform points inside each leaf.
+  const double finest_cell = 1.0 / (double(opt.slices) * std::ldexp(1.0, 3 * opt.max_depth));
   std::vector<double> mass(m_leaves.size(), 0.0);
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
   arena.execute([&] {
@@ -56,12 +59,16 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
           const float f = integrand(glm::min(p, Vec3(1.0f - 1e-7f)));
           if (std::isfinite(f) && f > 0.0f) sum += f;
         }
-        for (uint32_t i : leaf_points[l])
-          if (i < values.size()) {  // split_only points add nothing
+        double found = 0.0;  // the trained points' values, each over one finest cell
+        for (uint32_t i : leaf_points[l]) {
+          if (i >= points.size()) {
+            found += trained_values[i - points.size()] * finest_cell;
+          } else if (i < values.size()) {
             sum += values[i];
             ++count;
           }
-        mass[l] = sum / count * double(leaf.size.x) * leaf.size.y * leaf.size.z;
+        }
+        mass[l] = sum / count * double(leaf.size.x) * leaf.size.y * leaf.size.z + found;
       }
     });
   });

@@ -9,9 +9,12 @@
 // narrower than its feature would otherwise often miss it with a few uniform points), and leaves
 // are sampled in proportion to it, mixed with a defensive uniform component. Renders sample it
 // in a GuideMixture with the projective grid (core/guiding/mixture.h, DiffOptions::octree_grid_mix).
-// `split_only` points take part in the partition but add nothing to the leaf masses: the
-// training round's samples (DiffOptions::octree_training), chosen where the projective grid
-// under-samples the integrand, i.e. biased towards large values that would inflate their leaves.
+// `trained` points (the training round's, DiffOptions::octree_training) split like the others;
+// chosen where the projective grid under-samples the integrand, i.e. for large values, each adds
+// its value times the volume of one finest cell (depth max_depth) to its leaf's mass: counted
+// like the uniform points, times the leaf's volume, they inflated large leaves and starved the
+// rest; left out, a leaf around a narrow peak they found kept a zero mass whenever its uniform
+// points missed the peak (docs/reports/projective/README.md).
 //
 // Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
 // (coarsened(), said in the summary), never dropping samples or the boundary term.
@@ -37,7 +40,7 @@ class BoundaryOctree : public BoundaryGuide {
   // integrand(u) >= 0; called from several threads at once.
   BoundaryOctree(const std::vector<Vec3>& points, const OctreeOptions& options, uint64_t seed, int threads,
                  const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values = {},
-                 const std::vector<Vec3>& split_only = {});
+                 const std::vector<Vec3>& trained = {}, const std::vector<float>& trained_values = {});
 
   Vec3 sample(const Vec3& u, float* pdf) const override;
   float pdf(const Vec3& p) const override;

@@ -2,6 +2,7 @@
 // them (chi-square), the defensive component reaches every region, and the leaf budget coarsens.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <limits>
 
 #include "core/guiding/grid.h"
@@ -197,30 +198,43 @@ TEST_CASE("octree mixed with the projective grid: a normalised mixture that cove
   CHECK_THROWS_AS(GuideMixture(octree, nullptr, 0.5f), std::invalid_argument);
 }
 
-TEST_CASE("octree guiding: split-only points refine the partition and add nothing to the masses") {
-  // The training round's points (chosen for large weights) split like projections, but their
-  // values must not inflate their leaves: placed where the integrand is zero, their leaves keep
-  // the defensive density alone, and the tree stays a normalised density.
+TEST_CASE("octree guiding: trained points refine the partition and count over one finest cell") {
+  // The training round's points (chosen where the projective grid under-samples the integrand)
+  // split like projections; each adds its value times the volume of a finest cell to its leaf,
+  // not its value times the leaf's volume (they were chosen for large values).
   Pcg32 rng(21);
   const auto pts = projected_points(2000, rng);
   std::vector<float> values;
   for (const Vec3& p : pts) values.push_back(sparse(p));
-  std::vector<Vec3> extra;
+  std::vector<Vec3> extra;  // where the integrand is zero, so that the uniform points add nothing
   for (int i = 0; i < 300; ++i) extra.push_back(Vec3(0.05f, 0.9f, 0.9f) + 0.04f * Vec3(rng.next_float(), rng.next_float(), rng.next_float()));
   OctreeOptions opt;
   opt.slices = 16;
   opt.max_depth = 7;
   opt.leaf_samples = 4;
   const BoundaryOctree plain(pts, opt, 5, 0, sparse, values);
-  const BoundaryOctree refined(pts, opt, 5, 0, sparse, values, extra);
-  CHECK(refined.leaf_count() > plain.leaf_count() + 300);
+  const BoundaryOctree unvalued(pts, opt, 5, 0, sparse, values, extra, std::vector<float>(extra.size(), 0.0f));
+  const BoundaryOctree valued(pts, opt, 5, 0, sparse, values, extra, std::vector<float>(extra.size(), 1e4f));
+  CHECK(unvalued.leaf_count() > plain.leaf_count() + 300);
+  CHECK(valued.leaf_count() == unvalued.leaf_count());
+  CHECK(valued.describe().find("split at 2300 points") != std::string::npos);
+  const double finest = 1.0 / (16.0 * std::ldexp(1.0, 21));
+  double total = 0.0;  // the valued tree's mass in the extra points' leaves, as a share of its probability
+  std::vector<size_t> seen;
   for (const Vec3& p : extra) {
-    const size_t l = refined.region_of(p);
-    const Box b = refined.region_box(l);
-    CHECK(refined.region_probability(l) == doctest::Approx(opt.defensive * double(b.size.x) * b.size.y * b.size.z).epsilon(1e-3));
+    const size_t l = valued.region_of(p);
+    const Box b = valued.region_box(l);
+    const double volume = double(b.size.x) * b.size.y * b.size.z;
+    CHECK(unvalued.region_probability(l) == doctest::Approx(opt.defensive * volume).epsilon(1e-3));
+    CHECK(valued.region_probability(l) > 1.5 * opt.defensive * volume);
+    if (std::find(seen.begin(), seen.end(), l) == seen.end()) seen.push_back(l), total += valued.region_probability(l) - opt.defensive * volume;
   }
-  CHECK(mean_pdf(refined, rng, 200000) == doctest::Approx(1.0).epsilon(0.03));
-  const auto [chi, q] = chi_square(refined, 200000, rng);
+  // 300 points of value 1e4 over one finest cell each, against the slab and ball's total mass
+  // (40 x 0.008 x 0.5 + 10 x 4/3 pi 0.05^3 = 0.165): the share (1 - defensive) m / (m + 0.165).
+  const double m = 300 * 1e4 * finest;
+  CHECK(total == doctest::Approx((1.0 - opt.defensive) * m / (m + 0.165)).epsilon(0.1));
+  CHECK(mean_pdf(valued, rng, 200000) == doctest::Approx(1.0).epsilon(0.03));
+  const auto [chi, q] = chi_square(valued, 200000, rng);
   CHECK(chi < q);
-  CHECK(refined.describe().find("split at 2300 points") != std::string::npos);
+  CHECK_THROWS_AS(BoundaryOctree(pts, opt, 5, 0, sparse, values, extra, std::vector<float>(3, 1.0f)), std::invalid_argument);
 }
