@@ -199,8 +199,9 @@ class Scene:
           docs/reports/projective/README.md). ``octree_training`` (default 512) samples per pixel
           are first drawn from that grid; those whose weight f / g is at least twice the mean
           (where the grid under-samples the integrand) join the projections as points the octree
-          splits at (a training round in the manner of practical path guiding, not in the paper;
-          0: projections only, as in the paper).
+          splits at, each adding its value over one finest cell to its leaf's mass (a training
+          round in the manner of practical path guiding, not in the paper; 0: projections only,
+          as in the paper).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose
