@@ -142,7 +142,7 @@ def worker(name: str, guiding: str, budgets: list[int], runs: int) -> int:
 
 def main() -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--scenes", nargs="+", default=["sphere", "torus", "cube_hole"])
+    ap.add_argument("--scenes", nargs="+", default=["sphere", "torus", "cube_hole", "bunny"])
     ap.add_argument("--budgets", type=int, nargs="+", default=[4, 16, 64], help="Mitsuba's budgets")
     ap.add_argument("--limn-budgets", type=int, nargs="+", default=[4, 16, 64, 256, 1024],
                     help="limn's (larger: limn is faster per sample, the comparison is at equal time)")
