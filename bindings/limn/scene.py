@@ -151,7 +151,7 @@ class Scene:
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
         if opts["guiding_seeds"] is None:  # C++ reads 0 as "the guide's default"; an explicit 0 is refused
-            opts["guiding_seeds"] = 0  # the guide's default (32 for the grid, 256 for the octree)
+            opts["guiding_seeds"] = 0  # the guide's default (render_diff.h, seeds_per_pixel)
         elif int(opts["guiding_seeds"]) < 1:
             raise ValueError(f"guiding_seeds must be >= 1 or None (got {opts['guiding_seeds']})")
         if not (0.0 <= float(opts["octree_grid_mix"]) < 1.0):
@@ -206,7 +206,8 @@ class Scene:
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose
           segments (``project_seed``: ``"bsdf"``, ``"emitter"`` or ``"both"``) are projected onto
-          silhouettes; None: 32 for the grid, 256 for the octree (the octree splits only at
+          silhouettes; None: for the grid an eighth of ``spp_boundary``, between 32 and 128 (its
+          set-up stays a small share of the call), 256 for the octree (the octree splits only at
           projections where the integrand is non-zero, a few per cent of them).
         - ``guide_refresh`` k > 0 keeps the guide in ``Scene.guide_cache`` and reuses it for up to k
           calls while the settings are the same and no moving geometry moved by more than

@@ -220,20 +220,23 @@ def test_guides_are_reused_across_calls_until_refresh_or_motion():
 
 
 def test_seed_paths_per_guide_default_and_explicit():
-    """guiding_seeds=None traces 32 seed paths per pixel for the projective grid and 256 for the
-    octree; an explicit count applies to both; 0 is refused."""
+    """guiding_seeds=None traces an eighth of spp_boundary seed paths per pixel for the projective
+    grid, between 32 and 128, and 256 for the octree; an explicit count applies to both; 0 is
+    refused."""
     scene = load(shadow_scene(AREA))
     name = "box.vertex_positions"
     t = x_translation(scene, name)
     scene.set_differentiable([name])
     pixels = scene.width * scene.height
 
-    def seed_paths(**kw):
-        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, **kw)
+    def seed_paths(spp_boundary=1, **kw):
+        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=spp_boundary, **kw)
         line = next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
         return int(line.split(" seed paths")[0].rsplit(" ", 1)[1])
 
     assert seed_paths(guiding="grid") == 32 * pixels
+    assert seed_paths(guiding="grid", spp_boundary=640) == 80 * pixels
+    assert seed_paths(guiding="grid", spp_boundary=4096) == 128 * pixels
     assert seed_paths(guiding="octree") == 256 * pixels
     assert seed_paths(guiding="grid", guiding_seeds=4) == seed_paths(guiding="octree", guiding_seeds=4) == 4 * pixels
     with pytest.raises(ValueError, match="guiding_seeds"):
@@ -279,7 +282,7 @@ def test_octree_training_round_lowers_the_error():
     the under-sampled ones join the projections as the octree's points) is said in the summary,
     0 switches it off, a negative count is refused, and on the paper's near-specular test scene it
     lowers the octree's error at equal boundary samples (measured here over 8 runs: 0.47 without,
-    0.24 with the default 512 per pixel; docs/reports/projective/README.md has the 48x48 scenes)."""
+    0.23 with the default 512 per pixel; docs/reports/projective/README.md has the 48x48 scenes)."""
     scene, name, t, ref, rms = near_specular_sphere()
 
     def guide_line(**kw):
