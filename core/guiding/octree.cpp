@@ -30,12 +30,13 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   check_options(opt);
   if (!values.empty() && values.size() != points.size())
     throw std::invalid_argument("octree guiding: " + std::to_string(values.size()) + " values for " + std::to_string(points.size()) + " points");
-  // Projections where the integrand is zero (a silhouette no path observes) mark no feature:
-  // they would only split empty space (section 5.1.2 builds on "samples concentrated at the
-  // sparse features"; Mitsuba's prb_projective keeps points of non-zero mass likewise).
-  std::vector<Vec3> all = points;
   if (trained_values.size() != trained.size())
     throw std::invalid_argument("octree guiding: " + std::to_string(trained_values.size()) + " values for " + std::to_string(trained.size()) + " trained points");
+  // Projections where the integrand is zero (a silhouette no path observes) mark no feature:
+  // they would only split empty space (section 5.1.2 builds on "samples concentrated at the
+  // sparse features"; Mitsuba's prb_projective keeps points of non-zero mass likewise). Trained
+  // points (indices from points.size() on) were selected for non-zero values.
+  std::vector<Vec3> all = points;
   all.insert(all.end(), trained.begin(), trained.end());
   std::vector<uint32_t> splitting;
   for (size_t i = 0; i < all.size(); ++i)
