@@ -120,7 +120,7 @@ class Scene:
     DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "guiding_spp": 4,
                     "guiding_seeds": None,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
-                    "octree_grid_mix": 0.5, "octree_training": 512,
+                    "octree_grid_mix": 0.5, "octree_training": 512, "direction_mix": 0.2, "direction_resolution": 256,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
                     "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
                     "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True,
@@ -147,7 +147,7 @@ class Scene:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
         if int(opts["octree_training"]) < 0:
             raise ValueError(f"octree_training must be >= 0 (got {opts['octree_training']})")
-        for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples"):
+        for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples", "direction_resolution"):
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
         if opts["guiding_seeds"] is None:  # C++ reads 0 as "the guide's default"; an explicit 0 is refused
@@ -156,6 +156,8 @@ class Scene:
             raise ValueError(f"guiding_seeds must be >= 1 or None (got {opts['guiding_seeds']})")
         if not (0.0 <= float(opts["octree_grid_mix"]) < 1.0):
             raise ValueError(f"octree_grid_mix must be in [0, 1) (got {opts['octree_grid_mix']})")
+        if not (0.0 <= float(opts["direction_mix"]) < 1.0):
+            raise ValueError(f"direction_mix must be in [0, 1) (got {opts['direction_mix']})")
         if not (0.0 <= float(opts["heightfield_interval_mix"]) <= 1.0):
             raise ValueError(f"heightfield_interval_mix must be in [0, 1] (got {opts['heightfield_interval_mix']})")
         if not (0.0 <= float(opts["theta_subrange"]) < 180.0):
@@ -202,6 +204,12 @@ class Scene:
           splits at, each adding its value over one finest cell to its leaf's mass (a training
           round in the manner of practical path guiding, not in the paper; 0: projections only,
           as in the paper).
+        - ``direction_mix`` (projective grid and octree, default 0.2): the share of the projections'
+          direction histogram in the mixture, ``direction_resolution`` squared cells (default 256)
+          over the two direction coordinates, uniform along the edges. In a near-specular chain
+          every silhouette edge's integrand peaks at nearly the same directions, so it covers the
+          peaks of edges the projections missed, which the grid and the octree hold at the
+          defensive density only (0: off; docs/reports/projective/README.md).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose

@@ -28,6 +28,8 @@ class Tape {
   int32_t input() { return push(-1, 0.0); }
   size_t size() const { return m_nodes.size(); }
   void clear() { m_nodes.clear(); }
+  // Drops the nodes pushed after size() was `n` (a value-only evaluation undoing its recording).
+  void truncate(size_t n) { m_nodes.resize(std::min(n, m_nodes.size())); }
   // Adjoints of every node given d(output)/d(output) = seed; adj.size() == size() afterwards.
   void backward(int32_t output, double seed, std::vector<double>& adj) const {
     adj.assign(m_nodes.size(), 0.0);

@@ -56,7 +56,11 @@ void IndirectBoundary::sample(Pcg32& rng, PathInputs& in, std::vector<Splat>& sp
 
 float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
   // |L_d W sin(phi)| of the uniform-direction term, without the velocity (it depends on the
-  // tangent or adjoint, unknown when the guide is built).
+  // tangent or adjoint, unknown when the guide is built). Only the value is wanted: the nodes it
+  // records are dropped again, or a guide's millions of evaluations would grow the thread's tape
+  // by hundreds of megabytes (bunny, octree: 460 MB).
+  ad::Tape& tape = ad::Tape::current();
+  const size_t mark = tape.size();
   Pcg32 rng(seed, 0x6775696465ULL);
   PathInputs in;
   std::vector<Splat> splats;
@@ -65,6 +69,7 @@ float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
   sample_at(u, 1.0f, 1.0f, rng, in, splats, vel, rays, /*delta_terms=*/false);
   float v = 0.0f;
   for (const Splat& sp : splats) v += luminance(glm::abs(sp.value));
+  tape.truncate(mark);
   return v;
 }
 

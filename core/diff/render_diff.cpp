@@ -74,6 +74,11 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
   parse_seed_segments(opt.project_seed, scene.source);
   if (!(opt.octree_grid_mix >= 0.0f && opt.octree_grid_mix < 1.0f))
     throw std::invalid_argument(scene.source + ": octree_grid_mix must be in [0, 1) (got " + std::to_string(opt.octree_grid_mix) + ")");
+  if (!(opt.direction_mix >= 0.0f && opt.direction_mix < 1.0f))
+    throw std::invalid_argument(scene.source + ": direction_mix must be in [0, 1) (got " + std::to_string(opt.direction_mix) + ")");
+  if (opt.direction_resolution < 1 || opt.direction_resolution > 4096)
+    throw std::invalid_argument(scene.source + ": direction_resolution must be in [1, 4096] (got " +
+                                std::to_string(opt.direction_resolution) + ")");
   if (opt.octree_training < 0)
     throw std::invalid_argument(scene.source + ": octree_training must be >= 0 (got " + std::to_string(opt.octree_training) + ")");
   if (opt.guiding_spp < 1 || opt.guiding_seeds < 0)
@@ -321,18 +326,23 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
     });
   });
   auto grid = std::make_shared<BoundaryGrid>(res, points, values);
-  if (opt.guiding == "grid") {
-    terms.guide = grid;
-    return;
+  std::shared_ptr<const BoundaryGuide> guide = grid;
+  if (opt.guiding == "octree") {
+    std::vector<Vec3> trained;
+    std::vector<float> trained_values;
+    if (opt.octree_training > 0) training_points(scene, opt, integrand, *grid, arena, trained, trained_values, terms.guide_origin);
+    auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values, trained, trained_values);
+    guide = octree;
+    if (opt.octree_grid_mix > 0.0f) guide = std::make_shared<GuideMixture>(octree, grid, opt.octree_grid_mix);
   }
-  std::vector<Vec3> trained;
-  std::vector<float> trained_values;
-  if (opt.octree_training > 0) training_points(scene, opt, integrand, *grid, arena, trained, trained_values, terms.guide_origin);
-  auto octree = std::make_shared<BoundaryOctree>(points, opt.octree, opt.seed, opt.threads, integrand, values, trained, trained_values);
-  if (opt.octree_grid_mix > 0.0f)
-    terms.guide = std::make_shared<GuideMixture>(octree, grid, opt.octree_grid_mix);
-  else
-    terms.guide = octree;
+  // The projections' directions alone (kDirectionMix): uniform along u.x, so that it covers the
+  // edges the projections missed.
+  if (opt.direction_mix > 0.0f) {
+    const int D = opt.direction_resolution;
+    auto directions = std::make_shared<BoundaryGrid>(std::array<int, 3>{1, D, D}, points, values);
+    guide = std::make_shared<GuideMixture>(guide, directions, opt.direction_mix);
+  }
+  terms.guide = guide;
 }
 
 // The moving geometry's values and bounding-box diagonal (what decides whether a guide is stale).
@@ -368,6 +378,7 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
                           std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "," +
                           std::to_string(opt.octree_grid_mix) + "," + std::to_string(opt.octree_training) + "|" +
+                          std::to_string(opt.direction_mix) + "," + std::to_string(opt.direction_resolution) + "|" +
                           std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);
   float extent = 0.0f;
   const std::vector<float> geometry = moving_geometry(scene, params, extent);

@@ -48,6 +48,14 @@ constexpr int kOctreeSeeds = 256;
 // Default training samples per pixel of the octree's training round (render_diff.cpp,
 // training_points; docs/reports/projective/README.md).
 constexpr int kOctreeTraining = 512;
+// The projective guides' direction histogram (DiffOptions::direction_mix): near-specular chains
+// put every silhouette edge's integrand into a narrow peak around nearly the same directions
+// (towards the camera's mirror image), so directions learnt on the edges the projections found
+// also cover the peaks of the edges they missed, which the grid's and the octree's cells there
+// hold at the defensive density only (bunny: weights up to 1e7 times the mean, one render in
+// about six off by 10x the reference's RMS). docs/reports/projective/README.md.
+constexpr float kDirectionMix = 0.2f;
+constexpr int kDirectionResolution = 256;
 
 struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
@@ -67,6 +75,11 @@ struct DiffOptions {
   // Octree guiding: samples per pixel drawn from the projective grid whose under-sampled ones join
   // the projections as the octree's points (render_diff.cpp, training_points); 0: projections only.
   int octree_training = kOctreeTraining;
+  // Projective guides: the share of the projections' direction histogram in the sampling mixture
+  // (a projective grid of 1 x R x R cells over (u.y, u.z), uniform along the edges' axis u.x;
+  // render_diff.cpp, build_guide); 0: off.
+  float direction_mix = kDirectionMix;
+  int direction_resolution = kDirectionResolution;
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
   int guide_refresh = 0;              // rebuild after this many calls (0: every call)
   float guide_refresh_threshold = 0.02f;

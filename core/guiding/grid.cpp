@@ -66,8 +66,11 @@ void BoundaryGrid::finish(const std::vector<float>& mass, float defensive) {
 }
 
 std::string BoundaryGrid::describe() const {
-  return std::string(m_projective ? "projective grid " : "grid ") + std::to_string(m_res[0]) + "x" + std::to_string(m_res[1]) + "x" +
-         std::to_string(m_res[2]) + " (" + std::to_string(m_empty) + " of " + std::to_string(m_mass.size()) + " cells empty)";
+  // One cell along the first axis: a histogram of the directions alone (DiffOptions::direction_mix).
+  const std::string cells = m_res[0] == 1 ? "over the directions only, " + std::to_string(m_res[1]) + "x" + std::to_string(m_res[2])
+                                          : std::to_string(m_res[0]) + "x" + std::to_string(m_res[1]) + "x" + std::to_string(m_res[2]);
+  return std::string(m_projective ? "projective grid " : "grid ") + cells + " (" + std::to_string(m_empty) + " of " +
+         std::to_string(m_mass.size()) + " cells empty)";
 }
 
 size_t BoundaryGrid::cell_of(const Vec3& p) const {

@@ -255,12 +255,38 @@ def test_octree_grid_mix_option():
         quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="octree", guiding_seeds=2, **kw)
         return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
 
-    assert "mixed 50 % with the projective grid" in guide_line()
-    assert "mixed 30 % with the projective grid" in guide_line(octree_grid_mix=0.3)
-    assert "mixed" not in guide_line(octree_grid_mix=0.0)
+    assert "mixed 50 % with the projective grid 64x16x32" in guide_line()
+    assert "mixed 30 % with the projective grid 64x16x32" in guide_line(octree_grid_mix=0.3)
+    assert "projective grid 64x16x32" not in guide_line(octree_grid_mix=0.0)
     for bad in (1.0, -0.1):
         with pytest.raises(ValueError, match="octree_grid_mix"):
             scene.render_forward({name: t}, spp=1, guiding="octree", octree_grid_mix=bad)
+
+
+def test_direction_mix_option():
+    """Both projective guides are sampled in a mixture with the projections' direction histogram
+    (direction_mix, 20 % by default, direction_resolution^2 cells, said in the summary); 0 leaves
+    it out; the path-space baseline grid does not use it; bad values are refused."""
+    scene = load(shadow_scene(AREA))
+    name = "box.vertex_positions"
+    t = x_translation(scene, name)
+    scene.set_differentiable([name])
+
+    def guide_line(**kw):
+        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding_seeds=2, **kw)
+        return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+
+    for guiding in ("grid", "octree"):
+        assert "mixed 20 % with the projective grid over the directions only, 256x256" in guide_line(guiding=guiding)
+        assert "mixed 40 % with the projective grid over the directions only, 64x64" in guide_line(
+            guiding=guiding, direction_mix=0.4, direction_resolution=64)
+        assert "directions only" not in guide_line(guiding=guiding, direction_mix=0.0)
+    assert "directions only" not in guide_line(guiding="grid", projective=False)
+    for bad in (1.0, -0.1):
+        with pytest.raises(ValueError, match="direction_mix"):
+            scene.render_forward({name: t}, spp=1, guiding="grid", direction_mix=bad)
+    with pytest.raises(ValueError, match="direction_resolution"):
+        scene.render_forward({name: t}, spp=1, guiding="grid", direction_resolution=0)
 
 
 def near_specular_sphere(size=24):

@@ -238,3 +238,58 @@ TEST_CASE("octree guiding: trained points refine the partition and count over on
   CHECK(chi < q);
   CHECK_THROWS_AS(BoundaryOctree(pts, opt, 5, 0, sparse, values, extra, std::vector<float>(3, 1.0f)), std::invalid_argument);
 }
+
+namespace {
+
+// 40 "edges" along u.x, each with a narrow peak at nearly the same direction (u.y, u.z): the
+// shape of a near-specular chain's boundary integrand (DiffOptions::direction_mix).
+float ridges(const Vec3& u) {
+  const int edge = std::min(int(u.x * 40.0f), 39);
+  return glm::length(Vec2(u.y, u.z) - Vec2(0.75f + 0.0005f * edge, 0.84f)) < 0.01f ? 1e4f : 0.0f;
+}
+
+}  // namespace
+
+TEST_CASE("direction histogram: covers the peaks of the edges the projections missed") {
+  // Projections found the even edges' peaks only. The octree and the projective grid leave the
+  // odd edges' peaks at their defensive density; the histogram of the found points' directions
+  // (one cell along u.x) covers them, since every peak sits at nearly the same (u.y, u.z).
+  Pcg32 rng(21);
+  std::vector<Vec3> pts;
+  std::vector<float> values;
+  while (pts.size() < 4000) {
+    const Vec3 p(rng.next_float(), 0.74f + 0.04f * rng.next_float(), 0.82f + 0.04f * rng.next_float());
+    if (ridges(p) > 0.0f && int(p.x * 40.0f) % 2 == 0) {
+      pts.push_back(p);
+      values.push_back(ridges(p));
+    }
+  }
+  OctreeOptions opt;
+  opt.slices = 16;
+  opt.max_depth = 6;
+  opt.leaf_samples = 4;
+  auto octree = std::make_shared<BoundaryOctree>(pts, opt, 5, 0, ridges, values);
+  auto grid = std::make_shared<BoundaryGrid>(std::array<int, 3>{64, 16, 32}, pts, values);
+  auto guide = std::make_shared<GuideMixture>(octree, grid, 0.5f);
+  auto directions = std::make_shared<BoundaryGrid>(std::array<int, 3>{1, 64, 64}, pts, values);
+  const GuideMixture mix(guide, directions, 0.2f);
+  CHECK(mean_pdf(mix, rng, 400000) == doctest::Approx(1.0).epsilon(0.03));
+  CHECK(mix.box_probability({Vec3(0.0f), Vec3(1.0f)}) == doctest::Approx(1.0).epsilon(1e-5));
+  double first = 0.0;
+  for (int i = 0; i < 200000; ++i) first += mix.pdf_first(rng.next_float());
+  CHECK(first / 200000 == doctest::Approx(1.0).epsilon(0.02));
+  const auto [chi, q] = chi_square(mix, 200000, rng);
+  CHECK(chi < q);
+  CHECK(directions->describe().find("projective grid over the directions only, 64x64") == 0);
+  // The largest weight f / pdf on the odd edges' peaks, with and without the histogram.
+  double worst_without = 0.0, worst_with = 0.0;
+  for (int i = 0; i < 20000; ++i) {
+    const int edge = 2 * int(rng.next_float() * 20.0f) + 1;
+    const float r = 0.01f * std::sqrt(rng.next_float()), a = 6.2831853f * rng.next_float();
+    const Vec3 p((edge + rng.next_float()) / 40.0f, 0.75f + 0.0005f * edge + r * std::cos(a), 0.84f + r * std::sin(a));
+    if (ridges(p) == 0.0f) continue;
+    worst_without = std::max(worst_without, double(ridges(p) / guide->pdf(p)));
+    worst_with = std::max(worst_with, double(ridges(p) / mix.pdf(p)));
+  }
+  CHECK(worst_with * 10.0 < worst_without);
+}
