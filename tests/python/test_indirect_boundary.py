@@ -307,7 +307,7 @@ def test_octree_training_round_lowers_the_error():
     """The octree's training round (octree_training samples per pixel from the projective grid;
     the under-sampled ones join the projections as the octree's points) is said in the summary,
     0 switches it off, a negative count is refused, and on the paper's near-specular test scene it
-    lowers the octree's error at equal boundary samples (measured here over 8 runs: 0.47 without,
+    lowers the octree's error at equal boundary samples (measured here over 8 runs: 0.44 without,
     0.23 with the default 512 per pixel; docs/reports/projective/README.md has the 48x48 scenes)."""
     scene, name, t, ref, rms = near_specular_sphere()
 
