@@ -3,7 +3,8 @@
 // grid filled from the same projections: the octree's deep leaves hold the mass of the points
 // that were found, while the grid's coarse cells also cover the rest of the narrow feature those
 // points sample (a near-specular lobe's ridge along a silhouette) that the leaves next to them
-// estimate as empty from a few uniform points. Measured in docs/reports/projective/README.md.
+// estimate as empty from a few uniform points; and either projective guide with the histogram of
+// the projections' directions (DiffOptions::direction_mix). Measured in docs/reports/projective/README.md.
 #pragma once
 #include <memory>
 #include "core/guiding/guide.h"

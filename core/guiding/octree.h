@@ -8,7 +8,8 @@
 // together with the integrand at the projected points the leaf holds (`values`, optional: a leaf
 // narrower than its feature would otherwise often miss it with a few uniform points), and leaves
 // are sampled in proportion to it, mixed with a defensive uniform component. Renders sample it
-// in a GuideMixture with the projective grid (core/guiding/mixture.h, DiffOptions::octree_grid_mix).
+// in a GuideMixture with the projective grid (core/guiding/mixture.h, DiffOptions::octree_grid_mix)
+// and with the projections' direction histogram (DiffOptions::direction_mix).
 // `trained` points (the training round's, DiffOptions::octree_training) split like the others;
 // chosen where the projective grid under-samples the integrand, i.e. for large values, each adds
 // its value times the volume of one finest cell (depth max_depth) to its leaf's mass: counted

@@ -67,24 +67,35 @@ double mean_pdf(const BoundaryGuide& g, Pcg32& rng, int n) {
   return s / n;
 }
 
+// A small octree for these tests: 16 slabs.
+OctreeOptions small_octree(int max_depth, int leaf_samples) {
+  OctreeOptions opt;
+  opt.slices = 16;
+  opt.max_depth = max_depth;
+  opt.leaf_samples = leaf_samples;
+  return opt;
+}
+
+// The density and the first coordinate's integrate to 1, and samples follow the density.
+void check_density(const BoundaryGuide& g, Pcg32& rng) {
+  CHECK(mean_pdf(g, rng, 400000) == doctest::Approx(1.0).epsilon(0.03));
+  double first = 0.0;
+  for (int i = 0; i < 200000; ++i) first += g.pdf_first(rng.next_float());
+  CHECK(first / 200000 == doctest::Approx(1.0).epsilon(0.02));
+  const auto [chi, q] = chi_square(g, 200000, rng);
+  CHECK(chi < q);
+}
+
 }  // namespace
 
 TEST_CASE("octree guiding: pdf integrates to 1, samples follow it, defensive mass everywhere") {
   Pcg32 rng(3);
   const auto pts = projected_points(3000, rng);
-  OctreeOptions opt;
-  opt.slices = 16;
-  opt.max_depth = 7;
-  opt.leaf_samples = 8;
+  const OctreeOptions opt = small_octree(7, 8);
   const BoundaryOctree tree(pts, opt, 5, 0, sparse);
   CHECK(tree.leaf_count() > 1000);
   CHECK(!tree.coarsened());
-  CHECK(mean_pdf(tree, rng, 400000) == doctest::Approx(1.0).epsilon(0.03));
-  double first = 0.0;
-  for (int i = 0; i < 200000; ++i) first += tree.pdf_first(rng.next_float());
-  CHECK(first / 200000 == doctest::Approx(1.0).epsilon(0.02));
-  const auto [chi, q] = chi_square(tree, 200000, rng);
-  CHECK(chi < q);
+  check_density(tree, rng);
   // Most samples land on the sparse features; an empty region keeps the defensive density.
   int hits = 0;
   for (int i = 0; i < 20000; ++i) {
@@ -130,10 +141,7 @@ TEST_CASE("octree guiding: projections where the integrand is zero do not split"
     values.push_back(std::numeric_limits<float>::quiet_NaN());
     all.push_back(Vec3(x, 0.5f, 0.5f));
   }
-  OctreeOptions opt;
-  opt.slices = 16;
-  opt.max_depth = 7;
-  opt.leaf_samples = 4;
+  const OctreeOptions opt = small_octree(7, 4);
   const BoundaryOctree mixed(all, opt, 5, 0, sparse, values);
   const BoundaryOctree clean(features, opt, 5, 0, sparse, std::vector<float>(values.begin(), values.begin() + 2000));
   CHECK_THROWS_AS(BoundaryOctree(all, opt, 5, 0, sparse, std::vector<float>(10, 1.0f)), std::invalid_argument);
@@ -166,23 +174,15 @@ TEST_CASE("octree mixed with the projective grid: a normalised mixture that cove
     if (p.x > 0.5f || p.y < 0.1f) pts.push_back(p);
   std::vector<float> values;
   for (const Vec3& p : pts) values.push_back(sparse(p));
-  OctreeOptions opt;
-  opt.slices = 16;
-  opt.max_depth = 7;
-  opt.leaf_samples = 4;
+  const OctreeOptions opt = small_octree(7, 4);
   auto octree = std::make_shared<BoundaryOctree>(pts, opt, 5, 0, sparse, values);
   auto grid = std::make_shared<BoundaryGrid>(std::array<int, 3>{16, 4, 8}, pts, values);
   const GuideMixture mix(octree, grid, 0.5f);
-  CHECK(mean_pdf(mix, rng, 400000) == doctest::Approx(1.0).epsilon(0.03));
-  double first = 0.0;
-  for (int i = 0; i < 200000; ++i) first += mix.pdf_first(rng.next_float());
-  CHECK(first / 200000 == doctest::Approx(1.0).epsilon(0.02));
+  check_density(mix, rng);
   const Box all{Vec3(0.0f), Vec3(1.0f)};
   CHECK(octree->box_probability(all) == doctest::Approx(1.0).epsilon(1e-5));
   CHECK(grid->box_probability(all) == doctest::Approx(1.0).epsilon(1e-5));
   CHECK(mix.box_probability(all) == doctest::Approx(1.0).epsilon(1e-5));
-  const auto [chi, q] = chi_square(mix, 200000, rng);
-  CHECK(chi < q);
   CHECK(mix.describe().find("mixed 50 % with the projective grid") != std::string::npos);
   // The largest weight f / pdf on the part of the slab that no point reached (y in 0.1..0.25, the
   // grid cell row holding the found ones): the octree leaves it at the defensive 0.1 (weight 400), the
@@ -208,10 +208,7 @@ TEST_CASE("octree guiding: trained points refine the partition and count over on
   for (const Vec3& p : pts) values.push_back(sparse(p));
   std::vector<Vec3> extra;  // where the integrand is zero, so that the uniform points add nothing
   for (int i = 0; i < 300; ++i) extra.push_back(Vec3(0.05f, 0.9f, 0.9f) + 0.04f * Vec3(rng.next_float(), rng.next_float(), rng.next_float()));
-  OctreeOptions opt;
-  opt.slices = 16;
-  opt.max_depth = 7;
-  opt.leaf_samples = 4;
+  const OctreeOptions opt = small_octree(7, 4);
   const BoundaryOctree plain(pts, opt, 5, 0, sparse, values);
   const BoundaryOctree unvalued(pts, opt, 5, 0, sparse, values, extra, std::vector<float>(extra.size(), 0.0f));
   const BoundaryOctree valued(pts, opt, 5, 0, sparse, values, extra, std::vector<float>(extra.size(), 1e4f));
@@ -264,22 +261,14 @@ TEST_CASE("direction histogram: covers the peaks of the edges the projections mi
       values.push_back(ridges(p));
     }
   }
-  OctreeOptions opt;
-  opt.slices = 16;
-  opt.max_depth = 6;
-  opt.leaf_samples = 4;
+  const OctreeOptions opt = small_octree(6, 4);
   auto octree = std::make_shared<BoundaryOctree>(pts, opt, 5, 0, ridges, values);
   auto grid = std::make_shared<BoundaryGrid>(std::array<int, 3>{64, 16, 32}, pts, values);
   auto guide = std::make_shared<GuideMixture>(octree, grid, 0.5f);
   auto directions = std::make_shared<BoundaryGrid>(std::array<int, 3>{1, 64, 64}, pts, values);
   const GuideMixture mix(guide, directions, 0.2f);
-  CHECK(mean_pdf(mix, rng, 400000) == doctest::Approx(1.0).epsilon(0.03));
+  check_density(mix, rng);
   CHECK(mix.box_probability({Vec3(0.0f), Vec3(1.0f)}) == doctest::Approx(1.0).epsilon(1e-5));
-  double first = 0.0;
-  for (int i = 0; i < 200000; ++i) first += mix.pdf_first(rng.next_float());
-  CHECK(first / 200000 == doctest::Approx(1.0).epsilon(0.02));
-  const auto [chi, q] = chi_square(mix, 200000, rng);
-  CHECK(chi < q);
   CHECK(directions->describe().find("projective grid over the directions only, 64x64") == 0);
   // The largest weight f / pdf on the odd edges' peaks, with and without the histogram.
   double worst_without = 0.0, worst_with = 0.0;
