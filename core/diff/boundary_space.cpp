@@ -161,7 +161,7 @@ void BoundarySpace::finish_sphere(const BoundarySegment& s, const Vec3& n, const
 
 bool BoundarySpace::sample(const Vec3& u, float pdf_u, BoundaryPoint& out) const {
   size_t k;
-  const float f = m_select.sample_remapped(u.x, &k);
+  const float f = float(std::min(m_select.sample_remapped(u.x, &k), 1.0 - 1e-7));  // below 1 after rounding to float
   const BoundarySegment& s = m_segments[k];
   out.segment = int(k);
   if (s.kind == BoundarySegment::Kind::MeshEdge) {
@@ -200,7 +200,7 @@ Vec3 BoundarySpace::invert(int segment, const Vec3& xb, const Vec3& w) const {
 
 bool BoundarySpace::sample_delta(float u0, float pdf_u0, const Emitter& light, BoundaryPoint& out) const {
   size_t k;
-  const float f = m_select.sample_remapped(u0, &k);
+  const float f = float(std::min(m_select.sample_remapped(u0, &k), 1.0 - 1e-7));
   const BoundarySegment& s = m_segments[k];
   out.segment = int(k);
   const auto* point = std::get_if<PointEmitter>(&light.model);

@@ -271,7 +271,7 @@ void training_points(const Scene& scene, const DiffOptions& opt, const Integrand
     tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1024), [&](const tbb::blocked_range<uint64_t>& r) {
       for (uint64_t i = r.begin(); i != r.end(); ++i) {
         Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ 0x747261696e696e67ULL), i);
-        drawn[i] = first.sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf[i]);
+        drawn[i] = first.sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf[i]);
         value[i] = integrand(drawn[i]);
       }
     });
@@ -453,7 +453,7 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
         uint64_t r = 0;
         if (terms.guide) {
           float pdf_u;
-          const Vec3 u = terms.guide->sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf_u);
+          const Vec3 u = terms.guide->sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf_u);
           terms.indirect->sample_at(u, pdf_u, terms.guide->pdf_first(u.x), rng, in, splats, vel, r);
         } else {
           terms.indirect->sample(rng, in, splats, vel, r);

@@ -80,13 +80,13 @@ size_t BoundaryGrid::cell_of(const Vec3& p) const {
   return (size_t(i0) * m_res[1] + i1) * m_res[2] + i2;
 }
 
-Vec3 BoundaryGrid::sample(const Vec3& u, float* pdf) const {
+Vec3 BoundaryGrid::sample(const Vec3d& u, float* pdf) const {
   size_t c;
-  const float f = m_cells.sample_remapped(u.x, &c);
+  const double f = m_cells.sample_remapped(u.x, &c);
   const int i0 = int(c / (size_t(m_res[1]) * m_res[2])), i1 = int((c / m_res[2]) % m_res[1]), i2 = int(c % m_res[2]);
   // Inside the cell: the remapped first number for axis 0, the other two for axes 1 and 2, kept
   // below the cell's far face (i + f rounds up to i + 1 for f close to 1).
-  auto inside = [](int i, float f, int res) { return std::min((i + f) / res, std::nextafter(float(i + 1) / res, 0.0f)); };
+  auto inside = [](int i, double f, int res) { return std::min(float((i + f) / res), std::nextafter(float(i + 1) / res, 0.0f)); };
   const Vec3 p(inside(i0, f, m_res[0]), inside(i1, u.y, m_res[1]), inside(i2, u.z, m_res[2]));
   *pdf = m_cells.pmf(c) * float(m_mass.size());
   return p;

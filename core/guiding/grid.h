@@ -21,7 +21,7 @@ class BoundaryGrid : public BoundaryGuide {
   BoundaryGrid(std::array<int, 3> resolution, const std::vector<Vec3>& points, const std::vector<float>& values,
                float defensive = 0.1f);
 
-  Vec3 sample(const Vec3& u, float* pdf) const override;
+  Vec3 sample(const Vec3d& u, float* pdf) const override;
   float pdf(const Vec3& p) const override;
   float pdf_first(float p0) const override;
   size_t memory_bytes() const override { return m_mass.size() * 2 * sizeof(float) + m_cells.size() * sizeof(double); }

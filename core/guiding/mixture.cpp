@@ -13,13 +13,13 @@ GuideMixture::GuideMixture(std::shared_ptr<const BoundaryGuide> first, std::shar
   if (!(w > 0.0f && w < 1.0f)) throw std::invalid_argument("guide mixture: the weight must be in (0, 1) (got " + std::to_string(w) + ")");
 }
 
-Vec3 GuideMixture::sample(const Vec3& u, float* pdf) const {
+Vec3 GuideMixture::sample(const Vec3d& u, float* pdf) const {
   // The first number picks the component and is reused, rescaled (and kept below 1 against
   // rounding), inside it.
-  const float below_one = std::nextafter(1.0f, 0.0f);
+  const double below_one = std::nextafter(1.0, 0.0), w = m_w;
   float unused;
-  const Vec3 p = u.x < m_w ? m_second->sample(Vec3(std::min(u.x / m_w, below_one), u.y, u.z), &unused)
-                           : m_first->sample(Vec3(std::min((u.x - m_w) / (1.0f - m_w), below_one), u.y, u.z), &unused);
+  const Vec3 p = u.x < w ? m_second->sample(Vec3d(std::min(u.x / w, below_one), u.y, u.z), &unused)
+                         : m_first->sample(Vec3d(std::min((u.x - w) / (1.0 - w), below_one), u.y, u.z), &unused);
   *pdf = this->pdf(p);
   return p;
 }

@@ -15,7 +15,7 @@ class GuideMixture : public BoundaryGuide {
  public:
   GuideMixture(std::shared_ptr<const BoundaryGuide> first, std::shared_ptr<const BoundaryGuide> second, float second_weight);
 
-  Vec3 sample(const Vec3& u, float* pdf) const override;
+  Vec3 sample(const Vec3d& u, float* pdf) const override;
   float pdf(const Vec3& p) const override;
   float pdf_first(float p0) const override;
   size_t memory_bytes() const override { return m_first->memory_bytes() + m_second->memory_bytes(); }

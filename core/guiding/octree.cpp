@@ -171,11 +171,11 @@ int BoundaryOctree::leaf_at(const Vec3& p) const {
   return m_nodes[size_t(node)].leaf;
 }
 
-Vec3 BoundaryOctree::sample(const Vec3& u, float* pdf) const {
+Vec3 BoundaryOctree::sample(const Vec3d& u, float* pdf) const {
   size_t l;
-  const float f = m_select.sample_remapped(u.x, &l);
+  const double f = m_select.sample_remapped(u.x, &l);
   const Leaf& leaf = m_leaves[l];
-  const Vec3 p = glm::min(leaf.lo + leaf.size * Vec3(f, u.y, u.z), Vec3(1.0f - 1e-7f));
+  const Vec3 p = glm::min(Vec3(Vec3d(leaf.lo) + Vec3d(leaf.size) * Vec3d(f, u.y, u.z)), Vec3(1.0f - 1e-7f));
   // The density of the leaf that holds p (rounding at a leaf's far face can land in the next one).
   *pdf = this->pdf(p);
   return p;

@@ -43,7 +43,7 @@ class BoundaryOctree : public BoundaryGuide {
                  const std::function<float(const Vec3&)>& integrand, const std::vector<float>& values = {},
                  const std::vector<Vec3>& trained = {}, const std::vector<float>& trained_values = {});
 
-  Vec3 sample(const Vec3& u, float* pdf) const override;
+  Vec3 sample(const Vec3d& u, float* pdf) const override;
   float pdf(const Vec3& p) const override;
   float pdf_first(float p0) const override;
   size_t memory_bytes() const override;

@@ -49,21 +49,24 @@ class Distribution1D {
   }
   // Picks bin i for u and returns where u fell inside bin i's share of [0,1), rescaled to [0,1):
   // a second uniform number for free, so a 1D sample chooses both the bin and a point inside it.
-  float sample_remapped(float u, size_t* bin) const {
+  // The offset has the resolution of u divided by the bin's probability: a float u (24 bits)
+  // leaves a bin of probability p only p 2^24 distinct offsets, so callers that place points
+  // inside small-probability bins pass a double (Pcg32::next_double).
+  double sample_remapped(double u, size_t* bin) const {
     const size_t i = sample_discrete(u);
     *bin = i;
     const double lo = m_cdf[i], hi = m_cdf[i + 1];
-    const double f = hi > lo ? (double(u) - lo) / (hi - lo) : 0.5;
-    return float(std::clamp(f, 0.0, 1.0 - 1e-7));
+    const double f = hi > lo ? (u - lo) / (hi - lo) : 0.5;
+    return std::clamp(f, 0.0, std::nextafter(1.0, 0.0));
   }
   // Inverse of sample_remapped: the u that picks bin i with remapped offset f.
   float invert_remapped(size_t i, float f) const {
     const double u = m_cdf[i] + double(f) * (m_cdf[i + 1] - m_cdf[i]);
     return std::min(float(u), std::nextafter(float(m_cdf[i + 1]), 0.0f));
   }
-  size_t sample_discrete(float u) const {
+  size_t sample_discrete(double u) const {
     // First i with cdf[i+1] > u, skipping empty bins.
-    auto it = std::upper_bound(m_cdf.begin() + 1, m_cdf.end(), double(u));
+    auto it = std::upper_bound(m_cdf.begin() + 1, m_cdf.end(), u);
     size_t i = size_t(it - m_cdf.begin()) - 1;
     if (i >= m_func.size()) i = m_func.size() - 1;
     while (i > 0 && pmf(i) == 0.0f) --i;

@@ -26,6 +26,11 @@ class Pcg32 {
   }
   // Uniform in [0, 1): 24 random mantissa bits, so 1 - 2^-24 is the largest value.
   float next_float() { return static_cast<float>(next_u32() >> 8) * 0x1p-24f; }
+  // Uniform in [0, 1) with 53 random bits (two draws), for numbers that are remapped many times.
+  double next_double() {
+    const uint64_t hi = next_u32() >> 5, lo = next_u32() >> 6;
+    return double((hi << 26) | lo) * 0x1p-53;
+  }
   Vec2 next_2d() {
     const float a = next_float();
     return Vec2(a, next_float());

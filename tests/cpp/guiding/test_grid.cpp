@@ -23,7 +23,7 @@ TEST_CASE("grid guiding: pdf integrates to 1, sampling matches it, no zero-proba
   int in_slab = 0;
   for (int i = 0; i < 20000; ++i) {
     float pdf;
-    const Vec3 p = grid.sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf);
+    const Vec3 p = grid.sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf);
     CHECK(pdf == doctest::Approx(grid.pdf(p)).epsilon(1e-4));
     CHECK(pdf > 0.0f);
     in_slab += std::abs(p.x - 0.3f) < 0.04f;

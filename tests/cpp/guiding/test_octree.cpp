@@ -37,7 +37,7 @@ std::pair<double, double> chi_square(const BoundaryGuide& g, int n, Pcg32& rng) 
   std::vector<double> observed(g.region_count(), 0.0);
   for (int i = 0; i < n; ++i) {
     float pdf;
-    const Vec3 p = g.sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf);
+    const Vec3 p = g.sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf);
     CHECK(pdf == doctest::Approx(g.pdf(p)).epsilon(1e-4));
     observed[g.region_of(p)] += 1.0;
   }
@@ -100,7 +100,7 @@ TEST_CASE("octree guiding: pdf integrates to 1, samples follow it, defensive mas
   int hits = 0;
   for (int i = 0; i < 20000; ++i) {
     float pdf;
-    hits += sparse(tree.sample(Vec3(rng.next_float(), rng.next_float(), rng.next_float()), &pdf)) > 0.0f;
+    hits += sparse(tree.sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf)) > 0.0f;
   }
   CHECK(hits > 0.7 * 20000);
   CHECK(tree.pdf(Vec3(0.05f, 0.95f, 0.95f)) == doctest::Approx(0.1).epsilon(1e-3));
@@ -281,4 +281,65 @@ TEST_CASE("direction histogram: covers the peaks of the edges the projections mi
     worst_with = std::max(worst_with, double(ridges(p) / mix.pdf(p)));
   }
   CHECK(worst_with * 10.0 < worst_without);
+}
+
+namespace {
+
+// The u.x interval that `g` maps into one of its least probable regions (u.y, u.z fixed), found
+// on a lattice of 2^-20.
+std::pair<double, double> cold_run(const BoundaryGuide& g) {
+  const int n = 1 << 20;
+  double best = 2.0, lo = 0.0, hi = 0.0, start = 0.0;
+  size_t region = SIZE_MAX;
+  for (int k = 0; k <= n; ++k) {
+    const double u = (k + 0.5) / n;
+    float pdf;
+    const size_t r = k < n ? g.region_of(g.sample(Vec3d(u, 0.3, 0.7), &pdf)) : SIZE_MAX;
+    if (r == region) continue;
+    const double end = u - 1.0 / n;
+    if (region != SIZE_MAX && end > start && g.region_probability(region) < best) {
+      best = g.region_probability(region);
+      lo = start;
+      hi = end;
+    }
+    region = r;
+    start = u;
+  }
+  return {lo, hi};
+}
+
+// Distinct first coordinates of the points for 4096 u.x values evenly spread over [a, b].
+size_t distinct_x(const BoundaryGuide& g, double a, double b) {
+  std::vector<float> xs;
+  for (int k = 0; k < 4096; ++k) {
+    float pdf;
+    xs.push_back(g.sample(Vec3d(a + (b - a) * k / 4095.0, 0.3, 0.7), &pdf).x);
+  }
+  std::sort(xs.begin(), xs.end());
+  return size_t(std::unique(xs.begin(), xs.end()) - xs.begin());
+}
+
+}  // namespace
+
+TEST_CASE("guides keep the first number's precision: points inside a cold cell are not quantised") {
+  // u.x picks a cell and its remainder places the point along the first axis: with a float u.x
+  // a cell of probability p has only p 2^24 reachable points (here about 400 for the direction
+  // histogram's empty cells, whose points span the whole axis), with a double thousands.
+  Pcg32 rng(33);
+  const auto pts = projected_points(3000, rng);
+  std::vector<float> values;
+  for (const Vec3& p : pts) values.push_back(sparse(p));
+  auto octree = std::make_shared<BoundaryOctree>(pts, small_octree(7, 4), 5, 0, sparse, values);
+  auto grid = std::make_shared<BoundaryGrid>(std::array<int, 3>{64, 16, 32}, pts, values);
+  auto directions = std::make_shared<BoundaryGrid>(std::array<int, 3>{1, 64, 64}, pts, values);
+  const GuideMixture mix(std::make_shared<GuideMixture>(octree, grid, 0.5f), directions, 0.2f);
+  for (const BoundaryGuide* g : {static_cast<const BoundaryGuide*>(octree.get()), static_cast<const BoundaryGuide*>(directions.get())}) {
+    const auto [a, b] = cold_run(*g);
+    INFO(g->describe(), ": u.x in [", a, ", ", b, "]");
+    CHECK(b > a);
+    CHECK(distinct_x(*g, a, b) > 2000);
+  }
+  // The mixture hands u.x / 0.2 to the direction histogram.
+  const auto [a, b] = cold_run(*directions);
+  CHECK(distinct_x(mix, 0.2 * a, 0.2 * b) > 2000);
 }
