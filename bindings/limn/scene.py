@@ -195,21 +195,21 @@ class Scene:
           depth <= ``octree_max_depth``, ``octree_leaf_samples`` uniform samples per leaf, at most
           ``octree_max_leaves`` leaves: beyond that it coarsens and the summary says so), sampled
           in a mixture with the projective grid built from the same projections
-          (``octree_grid_mix``, its share, default 0.5; 0: the octree alone). The grid covers the
-          parts of a narrow feature next to the points that were found, which the octree's leaves
-          there estimate as empty; without it the octree's errors are heavy-tailed (see
-          docs/reports/projective/README.md). ``octree_training`` (default 512) samples per pixel
-          are first drawn from that grid; those whose weight f / g is at least twice the mean
-          (where the grid under-samples the integrand) join the projections as points the octree
-          splits at, each adding its value over one finest cell to its leaf's mass (a training
-          round in the manner of practical path guiding, not in the paper; 0: projections only,
-          as in the paper).
+          (``octree_grid_mix``, its share, default 0.5; 0: the octree alone). The grid covers the parts of
+          a narrow feature next to the points that were found, which the octree's leaves there estimate as
+          empty; without it the octree's errors are heavy-tailed (see docs/reports/projective/README.md).
+          ``octree_training`` (default 512) samples per pixel are first drawn from that grid and its
+          direction histogram (below); those whose weight f / g is at least twice the mean (where that
+          mixture under-samples the integrand) join the projections as points the octree splits at, each
+          adding its value over one finest cell to its leaf's mass (a training round in the manner of
+          practical path guiding, not in the paper; 0: projections only, as in the paper).
         - ``direction_mix`` (projective grid and octree, default 0.2): the share of the projections'
-          direction histogram in the mixture, ``direction_resolution`` squared cells (default 256)
-          over the two direction coordinates, uniform along the edges. In a near-specular chain
-          every silhouette edge's integrand peaks at nearly the same directions, so it covers the
-          peaks of edges the projections missed, which the grid and the octree hold at the
-          defensive density only (0: off; docs/reports/projective/README.md).
+          direction histogram in the mixture (the octree's and the grid's shares above are of the rest),
+          ``direction_resolution`` squared cells (default 256, at most 4096) over the sample space's second
+          and third coordinates (the direction for mesh edges), uniform along the first. In a near-specular
+          chain every silhouette edge's integrand peaks at nearly the same directions, so it covers the
+          peaks of edges the projections missed, which the grid and the octree hold at the defensive
+          density only (0: off; docs/reports/projective/README.md).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose

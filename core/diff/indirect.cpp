@@ -1,5 +1,6 @@
 #include "core/diff/indirect.h"
 
+#include <cstring>
 #include <map>
 #include "core/diff/film_projection.h"
 #include "core/math/warp.h"
@@ -54,13 +55,22 @@ void IndirectBoundary::sample(Pcg32& rng, PathInputs& in, std::vector<Splat>& sp
   sample_at(u, 1.0f, 1.0f, rng, in, splats, velocities, rays);
 }
 
+float IndirectBoundary::guide_value(const Vec3& u) const {
+  uint32_t bits[3];
+  std::memcpy(bits, &u, sizeof(bits));
+  return guide_value(u, mix_bits((uint64_t(bits[0]) << 32 | bits[1]) ^ (uint64_t(bits[2]) * 0x9E3779B97F4A7C15ULL)));
+}
+
 float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
   // |L_d W sin(phi)| of the uniform-direction term, without the velocity (it depends on the
   // tangent or adjoint, unknown when the guide is built). Only the value is wanted: the nodes it
   // records are dropped again, or a guide's millions of evaluations would grow the thread's tape
   // by hundreds of megabytes (bunny, octree: 460 MB).
-  ad::Tape& tape = ad::Tape::current();
-  const size_t mark = tape.size();
+  struct Rewind {  // also when sample_at throws
+    ad::Tape& tape;
+    size_t mark;
+    ~Rewind() { tape.truncate(mark); }
+  } rewind{ad::Tape::current(), ad::Tape::current().size()};
   Pcg32 rng(seed, 0x6775696465ULL);
   PathInputs in;
   std::vector<Splat> splats;
@@ -69,7 +79,6 @@ float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
   sample_at(u, 1.0f, 1.0f, rng, in, splats, vel, rays, /*delta_terms=*/false);
   float v = 0.0f;
   for (const Splat& sp : splats) v += luminance(glm::abs(sp.value));
-  tape.truncate(mark);
   return v;
 }
 

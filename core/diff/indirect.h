@@ -48,6 +48,9 @@ class IndirectBoundary {
                  std::vector<ad::Var>& velocities, uint64_t& rays, bool delta_terms = true) const;
   // Magnitude of the uniform-direction term at u (what grid guiding tabulates).
   float guide_value(const Vec3& u, uint64_t seed) const;
+  // The same with the random numbers seeded from u's bits: the integrand the guides are built
+  // from, the same value for the same point.
+  float guide_value(const Vec3& u) const;
 
  private:
   // Evaluates one boundary point (light = -1: any light, else that delta light alone); appends

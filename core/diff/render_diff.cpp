@@ -5,7 +5,6 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 #include <atomic>
-#include <cstring>
 #include <chrono>
 #include <mutex>
 #include "core/diff/interior.h"
@@ -288,19 +287,17 @@ void training_points(const Scene& scene, const DiffOptions& opt, const Integrand
     kept.push_back(drawn[i]);
     kept_values.push_back(value[i]);
   }
-  origin += "; trained with " + std::to_string(n) + " samples of the projective grid (" + std::to_string(valued) +
+  origin += "; trained with " + std::to_string(n) + " samples of the projective grid" +
+            (opt.direction_mix > 0.0f ? " and its direction histogram" : "") + " (" + std::to_string(valued) +
             " of non-zero value, " + std::to_string(kept.size()) + " under-sampled ones added to the octree's points)";
 }
 
 // The guiding distribution of the indirect term for this call: the path-space baseline grid
 // (random points per cell), or projected seeds into a grid (their integrand values) or an octree
-// (their positions; leaf masses from uniform samples), by default mixed with the projective grid.
+// (their positions; leaf masses from uniform samples; by default mixed with the projective grid),
+// either projective guide by default mixed with the projections' direction histogram.
 void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptions& opt, int max_depth, BoundaryTerms& terms) {
-  auto integrand = [&](const Vec3& u) {
-    uint32_t bits[3];
-    std::memcpy(bits, &u, sizeof(bits));
-    return ib.guide_value(u, mix_bits((uint64_t(bits[0]) << 32 | bits[1]) ^ (uint64_t(bits[2]) * 0x9E3779B97F4A7C15ULL)));
-  };
+  auto integrand = [&](const Vec3& u) { return ib.guide_value(u); };
   const int R = opt.grid_resolution;
   const std::array<int, 3> res{R, std::max(1, R / 4), std::max(1, R / 2)};
   if (opt.guiding == "grid" && !opt.projective) {
@@ -326,8 +323,8 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
     });
   });
   auto grid = std::make_shared<BoundaryGrid>(res, points, values);
-  // The projections' directions alone (kDirectionMix): uniform along u.x, so that it covers the
-  // edges the projections missed.
+  // The projections' directions alone (DiffOptions::direction_mix): uniform along u.x, so that it
+  // covers the edges the projections missed.
   std::shared_ptr<const BoundaryGrid> directions;
   if (opt.direction_mix > 0.0f) {
     const int D = opt.direction_resolution;
@@ -468,6 +465,16 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
 }
 
 }  // namespace
+
+std::shared_ptr<const BoundaryGuide> build_boundary_guide(const Scene& scene, const IndirectBoundary& indirect, const DiffOptions& opt,
+                                                          std::string* origin) {
+  if (opt.guiding != "grid" && opt.guiding != "octree")
+    throw std::invalid_argument(scene.source + ": build_boundary_guide needs guiding 'grid' or 'octree' (got '" + opt.guiding + "')");
+  BoundaryTerms terms;
+  build_guide(scene, indirect, opt, effective_max_depth(scene, opt.max_depth), terms);
+  if (origin) *origin = terms.guide_origin;
+  return terms.guide;
+}
 
 Image render_forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent,
                      const DiffOptions& opt, DiffStats* stats) {

@@ -20,6 +20,8 @@
 
 namespace limn {
 
+class IndirectBoundary;
+
 // A guide kept between calls (optimisation iterations). It is reused while the guiding settings
 // and the boundary sample space's layout are the same, for at most `guide_refresh` calls, and
 // while no moving geometry has moved by more than `guide_refresh_threshold` of its bounding-box
@@ -72,12 +74,13 @@ struct DiffOptions {
   // Octree guiding: the share of the projective grid, filled from the same projections, in the
   // sampling mixture (core/guiding/mixture.h); 0 samples the octree alone.
   float octree_grid_mix = 0.5f;
-  // Octree guiding: samples per pixel drawn from the projective grid whose under-sampled ones join
-  // the projections as the octree's points (render_diff.cpp, training_points); 0: projections only.
+  // Octree guiding: samples per pixel drawn from the projective grid (with its direction histogram)
+  // whose under-sampled ones join the projections as the octree's points (render_diff.cpp,
+  // training_points); 0: projections only.
   int octree_training = kOctreeTraining;
   // Projective guides: the share of the projections' direction histogram in the sampling mixture
-  // (a projective grid of 1 x R x R cells over (u.y, u.z), uniform along the edges' axis u.x;
-  // render_diff.cpp, build_guide); 0: off.
+  // (a projective grid of 1 x D x D cells over (u.y, u.z), D = direction_resolution, uniform along
+  // the segments' axis u.x; render_diff.cpp, build_guide); 0: off.
   float direction_mix = kDirectionMix;
   int direction_resolution = kDirectionResolution;
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
@@ -102,6 +105,12 @@ struct DiffStats {
   uint64_t invalid_paths = 0;   // non-finite values or derivatives, dropped
   std::vector<std::string> summary;  // what was computed and what was left out, and why
 };
+
+// The indirect term's guide as render_forward builds it for `options` (guiding "grid" or
+// "octree"), and the line saying how it was filled: for tools that study the guides
+// (tests/bench/guide_variance.cpp).
+std::shared_ptr<const BoundaryGuide> build_boundary_guide(const Scene& scene, const IndirectBoundary& indirect,
+                                                          const DiffOptions& options, std::string* origin = nullptr);
 
 // Derivative image d(image)/d(theta) along `tangent` (one value per slot of `params`).
 Image render_forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent,

@@ -67,7 +67,8 @@ void BoundaryGrid::finish(const std::vector<float>& mass, float defensive) {
 
 std::string BoundaryGrid::describe() const {
   // One cell along the first axis: a histogram of the directions alone (DiffOptions::direction_mix).
-  const std::string cells = m_res[0] == 1 ? "over the directions only, " + std::to_string(m_res[1]) + "x" + std::to_string(m_res[2])
+  const bool directions_only = m_res[0] == 1 && m_res[1] * m_res[2] > 1;
+  const std::string cells = directions_only ? "over the directions only, " + std::to_string(m_res[1]) + "x" + std::to_string(m_res[2])
                                           : std::to_string(m_res[0]) + "x" + std::to_string(m_res[1]) + "x" + std::to_string(m_res[2]);
   return std::string(m_projective ? "projective grid " : "grid ") + cells + " (" + std::to_string(m_empty) + " of " +
          std::to_string(m_mass.size()) + " cells empty)";
