@@ -159,9 +159,12 @@ void BoundarySpace::finish_sphere(const BoundarySegment& s, const Vec3& n, const
   out.param = n;
 }
 
+// The segment for u0 and the offset along it, kept below 1 after rounding to float.
+float BoundarySpace::select(float u0, size_t* k) const { return float(std::min(m_select.sample_remapped(u0, k), 1.0 - 1e-7)); }
+
 bool BoundarySpace::sample(const Vec3& u, float pdf_u, BoundaryPoint& out) const {
   size_t k;
-  const float f = float(std::min(m_select.sample_remapped(u.x, &k), 1.0 - 1e-7));  // below 1 after rounding to float
+  const float f = select(u.x, &k);
   const BoundarySegment& s = m_segments[k];
   out.segment = int(k);
   if (s.kind == BoundarySegment::Kind::MeshEdge) {
@@ -200,7 +203,7 @@ Vec3 BoundarySpace::invert(int segment, const Vec3& xb, const Vec3& w) const {
 
 bool BoundarySpace::sample_delta(float u0, float pdf_u0, const Emitter& light, BoundaryPoint& out) const {
   size_t k;
-  const float f = float(std::min(m_select.sample_remapped(u0, &k), 1.0 - 1e-7));
+  const float f = select(u0, &k);
   const BoundarySegment& s = m_segments[k];
   out.segment = int(k);
   const auto* point = std::get_if<PointEmitter>(&light.model);

@@ -67,6 +67,7 @@ class BoundarySpace {
   ad::V3<ad::Var> attached_point(const BoundaryPoint& p, PathInputs& in) const;
 
  private:
+  float select(float u0, size_t* segment) const;
   bool finish_edge(const BoundarySegment& s, float lambda, const Vec3& w, BoundaryPoint& out) const;
   void finish_sphere(const BoundarySegment& s, const Vec3& n, const Vec3& w, BoundaryPoint& out) const;
 

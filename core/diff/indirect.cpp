@@ -56,12 +56,6 @@ void IndirectBoundary::sample(Pcg32& rng, PathInputs& in, std::vector<Splat>& sp
 }
 
 float IndirectBoundary::guide_value(const Vec3& u) const {
-  uint32_t bits[3];
-  std::memcpy(bits, &u, sizeof(bits));
-  return guide_value(u, mix_bits((uint64_t(bits[0]) << 32 | bits[1]) ^ (uint64_t(bits[2]) * 0x9E3779B97F4A7C15ULL)));
-}
-
-float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
   // |L_d W sin(phi)| of the uniform-direction term, without the velocity (it depends on the
   // tangent or adjoint, unknown when the guide is built). Only the value is wanted: the nodes it
   // records are dropped again, or a guide's millions of evaluations would grow the thread's tape
@@ -71,7 +65,9 @@ float IndirectBoundary::guide_value(const Vec3& u, uint64_t seed) const {
     size_t mark;
     ~Rewind() { tape.truncate(mark); }
   } rewind{ad::Tape::current(), ad::Tape::current().size()};
-  Pcg32 rng(seed, 0x6775696465ULL);
+  uint32_t bits[3];
+  std::memcpy(bits, &u, sizeof(bits));
+  Pcg32 rng(mix_bits((uint64_t(bits[0]) << 32 | bits[1]) ^ (uint64_t(bits[2]) * 0x9E3779B97F4A7C15ULL)), 0x6775696465ULL);
   PathInputs in;
   std::vector<Splat> splats;
   std::vector<Var> vel;

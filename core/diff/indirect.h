@@ -46,10 +46,8 @@ class IndirectBoundary {
   // (pdf_u0: density of u.x alone, used by the delta-light terms that ignore u.y, u.z).
   void sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& inputs, std::vector<Splat>& splats,
                  std::vector<ad::Var>& velocities, uint64_t& rays, bool delta_terms = true) const;
-  // Magnitude of the uniform-direction term at u (what grid guiding tabulates).
-  float guide_value(const Vec3& u, uint64_t seed) const;
-  // The same with the random numbers seeded from u's bits: the integrand the guides are built
-  // from, the same value for the same point.
+  // Magnitude of the uniform-direction term at u: the integrand the guides are built from, with
+  // its random numbers seeded from u's bits (the same value for the same point).
   float guide_value(const Vec3& u) const;
 
  private:

@@ -75,9 +75,9 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
     throw std::invalid_argument(scene.source + ": octree_grid_mix must be in [0, 1) (got " + std::to_string(opt.octree_grid_mix) + ")");
   if (!(opt.direction_mix >= 0.0f && opt.direction_mix < 1.0f))
     throw std::invalid_argument(scene.source + ": direction_mix must be in [0, 1) (got " + std::to_string(opt.direction_mix) + ")");
-  if (opt.direction_resolution < 1 || opt.direction_resolution > 4096)
-    throw std::invalid_argument(scene.source + ": direction_resolution must be in [1, 4096] (got " +
-                                std::to_string(opt.direction_resolution) + ")");
+  if (opt.direction_resolution < 1 || opt.direction_resolution > BoundaryGrid::kMaxResolution)
+    throw std::invalid_argument(scene.source + ": direction_resolution must be in [1, " + std::to_string(BoundaryGrid::kMaxResolution) +
+                                "] (got " + std::to_string(opt.direction_resolution) + ")");
   if (opt.octree_training < 0)
     throw std::invalid_argument(scene.source + ": octree_training must be >= 0 (got " + std::to_string(opt.octree_training) + ")");
   if (opt.guiding_spp < 1 || opt.guiding_seeds < 0)
@@ -251,11 +251,11 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 
 // The octree's training round (iterative guiding in the manner of Muller et al. 2017's practical
 // path guiding; not in the projective-sampling paper): `octree_training` samples per pixel drawn
-// from the projective grid (with its direction histogram) and the integrand evaluated at each. A sample whose weight f / g is at
-// least kTrainingSelect times the mean weight lies where the grid has less than 1 / kTrainingSelect
-// of the density proportional to f: typically on the stretches of a narrow feature between the
-// projections, which the octree's leaves there would otherwise estimate as empty from a few
-// uniform points. Those samples join the projections as points the octree splits at, each adding
+// from the projective grid (with its direction histogram) and the integrand evaluated at each. A
+// sample whose weight f / g is at least kTrainingSelect times the mean weight lies where the grid
+// has less than 1 / kTrainingSelect of the density proportional to f: typically on the stretches
+// of a narrow feature between the projections, which the octree's leaves there would otherwise
+// estimate as empty from a few uniform points. Those samples join the projections as points the octree splits at, each adding
 // its value over one finest cell to its leaf's mass (core/guiding/octree.h). Measured in
 // docs/reports/projective/README.md.
 constexpr double kTrainingSelect = 2.0;

@@ -46,7 +46,8 @@ BoundaryGrid::BoundaryGrid(std::array<int, 3> res, const std::vector<Vec3>& poin
 
 void BoundaryGrid::check_resolution(const std::array<int, 3>& res) {
   for (int r : res)
-    if (r < 1 || r > 4096) throw std::invalid_argument("grid guiding: resolution must be in [1, 4096] (got " + std::to_string(r) + ")");
+    if (r < 1 || r > kMaxResolution)
+      throw std::invalid_argument("grid guiding: resolution must be in [1, " + std::to_string(kMaxResolution) + "] (got " + std::to_string(r) + ")");
 }
 
 void BoundaryGrid::finish(const std::vector<float>& mass, float defensive) {

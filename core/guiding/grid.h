@@ -35,6 +35,8 @@ class BoundaryGrid : public BoundaryGuide {
   size_t cell_count() const { return m_mass.size(); }
   size_t empty_cells() const { return m_empty; }
 
+  static constexpr int kMaxResolution = 4096;  // cells per axis
+
  private:
   static void check_resolution(const std::array<int, 3>& res);
   void finish(const std::vector<float>& mass, float defensive);
