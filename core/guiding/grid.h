@@ -1,9 +1,8 @@
 // Uniform grid guiding over the boundary sample space [0,1)^3 (projective-sampling paper, section
 // 5.1.1). Two ways to fill it: the path-space baseline estimates every cell's mass from
-// `samples_per_cell` random points; the projective grid takes in each cell the largest integrand
-// value among the projected samples (points found by projecting path segments onto silhouettes)
-// that land in it. Cells are sampled in proportion to their mass, mixed with a defensive uniform
-// component.
+// `samples_per_cell` random points; the projective grid accumulates the integrand at projected
+// samples (points found by projecting path segments onto silhouettes) into their cells. Cells are
+// sampled in proportion to their mass, mixed with a defensive uniform component.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -18,7 +17,7 @@ class BoundaryGrid : public BoundaryGuide {
   // Baseline: integrand(u) >= 0 at a point of [0,1)^3; called from several threads at once.
   BoundaryGrid(std::array<int, 3> resolution, int samples_per_cell, uint64_t seed, int threads,
                const std::function<float(const Vec3&)>& integrand, float defensive = 0.1f);
-  // Projective: each cell's mass is the largest of the values at the projected points inside it.
+  // Projective: the integrand's values at projected points accumulate into their cells.
   BoundaryGrid(std::array<int, 3> resolution, const std::vector<Vec3>& points, const std::vector<float>& values,
                float defensive = 0.1f);
 

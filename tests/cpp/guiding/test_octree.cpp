@@ -164,19 +164,6 @@ TEST_CASE("projective grid: values at projected points fill the cells") {
   CHECK(grid.describe().find("projective grid") == 0);
 }
 
-TEST_CASE("projective grid: a cell's mass is its largest projected value, not how many projections it got") {
-  // 100 projections of value 1 in one cell, a single one of value 2 in another: the cells'
-  // probabilities follow the values (1 : 2), where a sum would follow the counts (100 : 2).
-  std::vector<Vec3> pts(100, Vec3(0.1f, 0.1f, 0.1f));
-  std::vector<float> values(100, 1.0f);
-  pts.push_back(Vec3(0.9f, 0.9f, 0.9f));
-  values.push_back(2.0f);
-  const BoundaryGrid grid({2, 2, 2}, pts, values, 0.0f);
-  CHECK(grid.pdf(Vec3(0.9f, 0.9f, 0.9f)) == doctest::Approx(2.0f * grid.pdf(Vec3(0.1f, 0.1f, 0.1f))).epsilon(1e-5));
-  CHECK(grid.pdf(Vec3(0.1f, 0.1f, 0.1f)) == doctest::Approx(8.0f / 3.0f).epsilon(1e-5));
-  CHECK(grid.empty_cells() == 6);
-}
-
 TEST_CASE("octree mixed with the projective grid: a normalised mixture that covers what the points missed") {
   // Projections found only the lower fifth (y < 0.1) of the thin slab, all of the ball: the
   // octree's leaves over the rest of the slab see it with 4 uniform points each, the grid's coarse
