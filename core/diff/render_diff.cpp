@@ -255,9 +255,9 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 // sample whose weight f / g is at least kTrainingSelect times the mean weight lies where the grid
 // has less than 1 / kTrainingSelect of the density proportional to f: typically on the stretches
 // of a narrow feature between the projections, which the octree's leaves there would otherwise
-// estimate as empty from a few uniform points. Those samples join the projections as points the octree splits at, each adding
-// its value over one finest cell to its leaf's mass (core/guiding/octree.h). Measured in
-// docs/reports/projective/README.md.
+// estimate as empty from a few uniform points. Those samples join the projections as points the
+// octree splits at, each adding its value over one finest cell to its leaf's mass
+// (core/guiding/octree.h). Measured in docs/reports/projective/README.md.
 constexpr double kTrainingSelect = 2.0;
 
 template <typename Integrand>
@@ -298,8 +298,7 @@ void training_points(const Scene& scene, const DiffOptions& opt, const Integrand
 // either projective guide by default mixed with the projections' direction histogram.
 void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptions& opt, int max_depth, BoundaryTerms& terms) {
   auto integrand = [&](const Vec3& u) { return ib.guide_value(u); };
-  const int R = opt.grid_resolution;
-  const std::array<int, 3> res{R, std::max(1, R / 4), std::max(1, R / 2)};
+  const std::array<int, 3> res = grid_cells(opt);
   if (opt.guiding == "grid" && !opt.projective) {
     terms.guide = std::make_shared<BoundaryGrid>(res, opt.guiding_spp, opt.seed, opt.threads, integrand);
     terms.guide_origin = std::to_string(opt.guiding_spp) + " random points per cell";

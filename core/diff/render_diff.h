@@ -9,6 +9,7 @@
 // calls (GuideCache). The summary says what was computed and what was skipped.
 #pragma once
 #include <algorithm>
+#include <array>
 #include <functional>
 #include <string>
 #include <vector>
@@ -92,6 +93,12 @@ struct DiffOptions {
   int threads = 0;
   std::function<bool(float)> progress;
 };
+// The grid guides' cells: grid_resolution along the segments' axis, a quarter and a half of it
+// along the two direction axes.
+inline std::array<int, 3> grid_cells(const DiffOptions& o) {
+  const int R = o.grid_resolution;
+  return {R, std::max(1, R / 4), std::max(1, R / 2)};
+}
 inline int seeds_per_pixel(const DiffOptions& o) {
   if (o.guiding_seeds > 0) return o.guiding_seeds;
   if (o.guiding == "octree") return kOctreeSeeds;

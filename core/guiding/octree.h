@@ -11,8 +11,9 @@
 // in a GuideMixture with the projective grid (core/guiding/mixture.h, DiffOptions::octree_grid_mix)
 // and with the projections' direction histogram (DiffOptions::direction_mix).
 // `trained` points (the training round's, DiffOptions::octree_training) split like the others;
-// chosen where the projective grid (with its direction histogram) under-samples the integrand, i.e. for large values, each adds
-// its value times the volume of one finest cell (depth max_depth) to its leaf's mass: counted
+// chosen where the projective grid (with its direction histogram) under-samples the integrand,
+// i.e. for large values, each adds its value times the volume of one finest cell (depth
+// max_depth) to its leaf's mass: counted
 // like the uniform points, times the leaf's volume, they inflated large leaves and starved the
 // rest; left out, a leaf around a narrow peak they found kept a zero mass whenever its uniform
 // points missed the peak (docs/reports/projective/README.md).

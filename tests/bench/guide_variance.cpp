@@ -8,7 +8,6 @@
 // guide misses; q's own relative variance is printed as a check. The integrand f is the guides'
 // (IndirectBoundary::guide_value, without the tangent's velocity). Also printed: the least relative
 // variance any grid of the default shape can reach, from the same samples. Markdown on stdout.
-#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -16,6 +15,7 @@
 #include <tbb/parallel_for.h>
 #include "core/diff/indirect.h"
 #include "core/diff/render_diff.h"
+#include "core/guiding/grid.h"
 #include "core/guiding/mixture.h"
 #include "core/io/scene_loader.h"
 #include "core/math/rng.h"
@@ -59,13 +59,17 @@ int main(int argc, char** argv) {
         0.5f);
     const size_t M = size_t(qspp) * scene->camera.width * scene->camera.height;
     std::vector<Vec3> u(M);
-    std::vector<double> fq(M, 0.0);  // f / q, 0 where f or q is not usable
+    std::vector<double> fq(M, 0.0);   // f / q, 0 where f or q is not usable
+    std::vector<double> f2q(M, 0.0);  // f^2 / q = (f/q)^2 q: E_q[f2q / p] = E_p[(f/p)^2]
     tbb::parallel_for(size_t(0), M, [&](size_t i) {
       Pcg32 rng = pixel_rng(mix_bits(424242), i);
       float pdf;
       u[i] = q->sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf);
       const float f = ib.guide_value(u[i]);
-      if (pdf > 0.0f && std::isfinite(f) && f > 0.0f) fq[i] = double(f) / pdf;
+      if (pdf > 0.0f && std::isfinite(f) && f > 0.0f) {
+        fq[i] = double(f) / pdf;
+        f2q[i] = fq[i] * double(f);
+      }
     });
     double F = 0.0, s2 = 0.0;
     for (double w : fq) {
@@ -79,16 +83,15 @@ int main(int argc, char** argv) {
     // volume), least at P_c ~ sqrt(V_c int_c f^2); the grid of exact cell integrals (with the
     // guides' 10 % defensive share) is what a perfect cell-mass estimate would give.
     {
-      const int R = base.grid_resolution;
-      const std::array<int, 3> res{R, std::max(1, R / 4), std::max(1, R / 2)};
-      const size_t n = size_t(res[0]) * res[1] * res[2];
+      const std::array<int, 3> res = grid_cells(base);
+      const BoundaryGrid cells(res, {}, {});  // only its cell layout
+      const size_t n = cells.cell_count();
       std::vector<double> integral(n, 0.0), second(n, 0.0);
       for (size_t i = 0; i < M; ++i) {
         if (fq[i] == 0.0) continue;
-        size_t c = 0;
-        for (int a = 0; a < 3; ++a) c = c * res[a] + size_t(std::clamp(int(u[i][a] * res[a]), 0, res[a] - 1));
+        const size_t c = cells.region_of(u[i]);
         integral[c] += fq[i] / double(M);
-        second[c] += fq[i] * fq[i] * q->pdf(u[i]) / double(M);  // int_c f^2 = E_q[(f/q)^2 q 1_c]
+        second[c] += f2q[i] / double(M);  // int_c f^2 = E_q[f^2 / q 1_c]
       }
       const double V = 1.0 / double(n);
       double root = 0.0, exact = 0.0;
@@ -110,7 +113,7 @@ int main(int argc, char** argv) {
           std::vector<double> part(M);
           tbb::parallel_for(size_t(0), M, [&](size_t i) {
             const float pu = p->pdf(u[i]);
-            part[i] = pu > 0.0f ? fq[i] * fq[i] * (q->pdf(u[i]) / pu) : 0.0;  // f^2 / (p q) = (f/q)^2 q / p
+            part[i] = pu > 0.0f ? f2q[i] / pu : 0.0;
           });
           double m2 = 0.0;
           for (double v : part) m2 += v / double(M);
