@@ -117,8 +117,8 @@ class Scene:
         return list(self._differentiable)
 
     # Derivative options and their defaults (render_forward / render_backward keyword arguments).
-    DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "guiding_spp": 4,
-                    "guiding_seeds": None,
+    DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "grid_octaves": 2,
+                    "guiding_spp": 4, "guiding_seeds": None,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
                     "octree_grid_mix": 0.5, "octree_training": 512, "direction_mix": 0.2, "direction_resolution": 256,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
@@ -145,6 +145,8 @@ class Scene:
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
+        if not (0 <= int(opts["grid_octaves"]) <= 8):
+            raise ValueError(f"grid_octaves must be in [0, 8] (got {opts['grid_octaves']})")
         if int(opts["octree_training"]) < 0:
             raise ValueError(f"octree_training must be >= 0 (got {opts['octree_training']})")
         for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples", "direction_resolution"):
@@ -212,6 +214,12 @@ class Scene:
           density only (0: off; docs/reports/projective/README.md).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
+        - ``grid_octaves`` (projective grid and the octree's grid, default 2): the projections fill
+          a pyramid of grids, R 2^k cells along the first axis (R/4 2^k, R/2 2^k along the others)
+          for k = -grid_octaves .. grid_octaves, sampled with equal shares (not in the paper: the
+          fine levels resolve narrow lobes at no extra integrand evaluations, the coarse ones cover
+          the gaps between seed paths; docs/reports/projective/README.md); 0: one grid, as in the
+          paper. Levels over 4M cells are left out and the summary says so.
         - ``guiding_seeds``: projective guides trace ``guiding_seeds`` seed paths per pixel, whose
           segments (``project_seed``: ``"bsdf"``, ``"emitter"`` or ``"both"``) are projected onto
           silhouettes; None: for the grid an eighth of ``spp_boundary``, between 32 and 128 (its

@@ -90,6 +90,7 @@ DiffOptions diff_options(const py::dict& options) {
     else if (k == "threads") o.threads = value.cast<int>();
     else if (k == "guiding") o.guiding = value.cast<std::string>();
     else if (k == "grid_resolution") o.grid_resolution = value.cast<int>();
+    else if (k == "grid_octaves") o.grid_octaves = value.cast<int>();
     else if (k == "guiding_spp") o.guiding_spp = value.cast<int>();
     else if (k == "guiding_seeds") o.guiding_seeds = value.cast<int>();
     else if (k == "max_depth") o.max_depth = value.is_none() ? kSceneMaxDepth : value.cast<int>();

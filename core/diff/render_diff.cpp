@@ -78,6 +78,13 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
   if (opt.direction_resolution < 1 || opt.direction_resolution > BoundaryGrid::kMaxResolution)
     throw std::invalid_argument(scene.source + ": direction_resolution must be in [1, " + std::to_string(BoundaryGrid::kMaxResolution) +
                                 "] (got " + std::to_string(opt.direction_resolution) + ")");
+  const std::array<int, 3> cells = grid_cells(opt);
+  if (opt.guiding != "none" && (opt.grid_resolution < 1 || size_t(cells[0]) * cells[1] * cells[2] > BoundaryGrid::kMaxCells))
+    throw std::invalid_argument(scene.source + ": grid_resolution " + std::to_string(opt.grid_resolution) + " gives " +
+                                std::to_string(size_t(cells[0]) * cells[1] * cells[2]) + " grid cells, which exceed the limit of " +
+                                std::to_string(BoundaryGrid::kMaxCells));
+  if (opt.grid_octaves < 0 || opt.grid_octaves > 8)
+    throw std::invalid_argument(scene.source + ": grid_octaves must be in [0, 8] (got " + std::to_string(opt.grid_octaves) + ")");
   if (opt.octree_training < 0)
     throw std::invalid_argument(scene.source + ": octree_training must be >= 0 (got " + std::to_string(opt.octree_training) + ")");
   if (opt.guiding_spp < 1 || opt.guiding_seeds < 0)
@@ -321,7 +328,8 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
       for (size_t i = r.begin(); i != r.end(); ++i) values[i] = integrand(points[i]);
     });
   });
-  auto grid = std::make_shared<BoundaryGrid>(res, points, values);
+  // The projections' values fill a pyramid of grids around the grid's resolution (GridPyramid).
+  auto grid = std::make_shared<GridPyramid>(res, opt.grid_octaves, points, values);
   // The projections' directions alone (DiffOptions::direction_mix): uniform along u.x, so that it
   // covers the edges the projections missed.
   std::shared_ptr<const BoundaryGrid> directions;
@@ -377,7 +385,7 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
                     BoundaryTerms& terms) {
   GuideCache* cache = opt.guide_refresh > 0 ? opt.guide_cache : nullptr;
   const std::string key = opt.guiding + "|" + (opt.projective ? "p" : "u") + "|" + opt.project_seed + "|" +
-                          std::to_string(opt.grid_resolution) + "|" + std::to_string(opt.guiding_spp) + "|" +
+                          std::to_string(opt.grid_resolution) + "," + std::to_string(opt.grid_octaves) + "|" + std::to_string(opt.guiding_spp) + "|" +
                           std::to_string(seeds_per_pixel(opt)) + "|" +
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
                           std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "," +

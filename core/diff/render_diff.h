@@ -59,6 +59,9 @@ constexpr int kOctreeTraining = 512;
 // about six off by 10x the reference's RMS). docs/reports/projective/README.md.
 constexpr float kDirectionMix = 0.2f;
 constexpr int kDirectionResolution = 256;
+// The projective grid's pyramid (core/guiding/grid.h, GridPyramid): grids from R/4 to 4R cells
+// along each axis; docs/reports/projective/README.md.
+constexpr int kGridOctaves = 2;
 
 struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
@@ -68,6 +71,9 @@ struct DiffOptions {
   bool projective = true;        // grid: fill from projected seeds (false: the path-space baseline)
   std::string project_seed = "both";  // seed segments from "bsdf", "emitter" or "both" (core/diff/seeding.h)
   int grid_resolution = 64;      // grid cells along the first axis; (R/4, R/2) along the direction axes
+  // Projective grid: a pyramid of grids at R 2^k cells (and R/4 2^k, R/2 2^k), k = -grid_octaves
+  // .. grid_octaves, filled from the same projections (GridPyramid); 0: one grid, as in the paper.
+  int grid_octaves = kGridOctaves;
   int guiding_spp = 4;           // baseline grid: random points per cell
   // Projective guides: seed paths per pixel; 0 picks the guide's default (seeds_per_pixel).
   int guiding_seeds = 0;

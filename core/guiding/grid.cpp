@@ -3,11 +3,17 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 #include "core/math/rng.h"
 
 namespace limn {
+
+namespace {
+std::string cells_text(const std::array<int, 3>& r) { return std::to_string(r[0]) + "x" + std::to_string(r[1]) + "x" + std::to_string(r[2]); }
+}  // namespace
 
 BoundaryGrid::BoundaryGrid(std::array<int, 3> res, int spc, uint64_t seed, int threads,
                            const std::function<float(const Vec3&)>& integrand, float defensive)
@@ -48,6 +54,9 @@ void BoundaryGrid::check_resolution(const std::array<int, 3>& res) {
   for (int r : res)
     if (r < 1 || r > kMaxResolution)
       throw std::invalid_argument("grid guiding: resolution must be in [1, " + std::to_string(kMaxResolution) + "] (got " + std::to_string(r) + ")");
+  if (size_t(res[0]) * res[1] * res[2] > kMaxCells)
+    throw std::invalid_argument("grid guiding: " + cells_text(res) + " cells exceed the limit of " + std::to_string(kMaxCells) +
+                                " (lower grid_resolution)");
 }
 
 void BoundaryGrid::finish(const std::vector<float>& mass, float defensive) {
@@ -70,7 +79,7 @@ std::string BoundaryGrid::describe() const {
   // One cell along the first axis: a histogram of the directions alone (DiffOptions::direction_mix).
   const bool directions_only = m_res[0] == 1 && m_res[1] * m_res[2] > 1;
   const std::string cells = directions_only ? "over the directions only, " + std::to_string(m_res[1]) + "x" + std::to_string(m_res[2])
-                                          : std::to_string(m_res[0]) + "x" + std::to_string(m_res[1]) + "x" + std::to_string(m_res[2]);
+                                          : cells_text(m_res);
   return std::string(m_projective ? "projective grid " : "grid ") + cells + " (" + std::to_string(m_empty) + " of " +
          std::to_string(m_mass.size()) + " cells empty)";
 }
@@ -101,8 +110,19 @@ Box BoundaryGrid::region_box(size_t c) const {
 }
 
 double BoundaryGrid::box_probability(const Box& box) const {
+  // Only the cells the box overlaps (one cell more on each side against rounding).
+  std::array<int, 3> lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::clamp(int(std::floor(box.lo[a] * m_res[a])) - 1, 0, m_res[a] - 1);
+    hi[a] = std::clamp(int(std::ceil((box.lo[a] + box.size[a]) * m_res[a])), 0, m_res[a] - 1);
+  }
   double total = 0.0;
-  for (size_t c = 0; c < m_mass.size(); ++c) total += m_cells.pmf(c) * overlap_fraction(region_box(c), box);
+  for (int i0 = lo[0]; i0 <= hi[0]; ++i0)
+    for (int i1 = lo[1]; i1 <= hi[1]; ++i1)
+      for (int i2 = lo[2]; i2 <= hi[2]; ++i2) {
+        const size_t c = (size_t(i0) * m_res[1] + i1) * m_res[2] + i2;
+        total += m_cells.pmf(c) * overlap_fraction(region_box(c), box);
+      }
   return total;
 }
 
@@ -111,6 +131,69 @@ float BoundaryGrid::pdf(const Vec3& p) const { return m_cells.pmf(cell_of(p)) * 
 float BoundaryGrid::pdf_first(float p0) const {
   const int i0 = std::clamp(int(p0 * m_res[0]), 0, m_res[0] - 1);
   return m_first[i0] * float(m_res[0]);
+}
+
+GridPyramid::GridPyramid(std::array<int, 3> res, int octaves, const std::vector<Vec3>& points, const std::vector<float>& values,
+                         float defensive) {
+  if (octaves < 0 || octaves > 8) throw std::invalid_argument("grid guiding: grid_octaves must be in [0, 8] (got " + std::to_string(octaves) + ")");
+  for (int k = -octaves; k <= octaves; ++k) {
+    std::array<int, 3> level;
+    size_t cells = 1;
+    for (int a = 0; a < 3; ++a) {
+      level[a] = k < 0 ? std::max(1, res[a] >> -k) : res[a] << k;
+      cells *= size_t(level[a]);
+    }
+    const bool too_fine = k > 0 && (cells > kMaxLevelCells || *std::max_element(level.begin(), level.end()) > BoundaryGrid::kMaxResolution);
+    if (too_fine) {
+      ++m_left_out;
+      continue;
+    }
+    m_levels.emplace_back(level, points, values, defensive);
+  }
+}
+
+Vec3 GridPyramid::sample(const Vec3d& u, float* pdf) const {
+  // The first number picks the level and is reused, rescaled (and kept below 1), inside it.
+  const double L = double(m_levels.size()), scaled = u.x * L;
+  const size_t l = std::min(size_t(scaled), m_levels.size() - 1);
+  float unused;
+  const Vec3 p = m_levels[l].sample(Vec3d(std::min(scaled - double(l), std::nextafter(1.0, 0.0)), u.y, u.z), &unused);
+  *pdf = this->pdf(p);
+  return p;
+}
+
+float GridPyramid::pdf(const Vec3& p) const {
+  double sum = 0.0;
+  for (const BoundaryGrid& g : m_levels) sum += g.pdf(p);
+  return float(sum / double(m_levels.size()));
+}
+
+float GridPyramid::pdf_first(float p0) const {
+  double sum = 0.0;
+  for (const BoundaryGrid& g : m_levels) sum += g.pdf_first(p0);
+  return float(sum / double(m_levels.size()));
+}
+
+double GridPyramid::box_probability(const Box& box) const {
+  double sum = 0.0;
+  for (const BoundaryGrid& g : m_levels) sum += g.box_probability(box);
+  return sum / double(m_levels.size());
+}
+
+size_t GridPyramid::memory_bytes() const {
+  size_t bytes = 0;
+  for (const BoundaryGrid& g : m_levels) bytes += g.memory_bytes();
+  return bytes;
+}
+
+std::string GridPyramid::describe() const {
+  if (m_levels.size() == 1 && m_left_out == 0) return m_levels[0].describe();
+  std::string s = "projective grid pyramid of " + std::to_string(m_levels.size()) + " levels, " + cells_text(m_levels.front().resolution()) + " to " +
+                  cells_text(m_levels.back().resolution()) + " cells, equal shares (" + std::to_string(m_levels.back().empty_cells()) + " of " +
+                  std::to_string(m_levels.back().cell_count()) + " finest cells empty)";
+  if (m_left_out > 0)
+    s += ", " + std::to_string(m_left_out) + " finer level(s) left out (over " + std::to_string(kMaxLevelCells) + " cells)";
+  return s;
 }
 
 }  // namespace limn

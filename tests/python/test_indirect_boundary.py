@@ -255,12 +255,40 @@ def test_octree_grid_mix_option():
         quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="octree", guiding_seeds=2, **kw)
         return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
 
-    assert "mixed 50 % with the projective grid 64x16x32" in guide_line()
-    assert "mixed 30 % with the projective grid 64x16x32" in guide_line(octree_grid_mix=0.3)
-    assert "projective grid 64x16x32" not in guide_line(octree_grid_mix=0.0)
+    assert "mixed 50 % with the projective grid pyramid of 5 levels" in guide_line()
+    assert "mixed 30 % with the projective grid pyramid" in guide_line(octree_grid_mix=0.3)
+    assert "projective grid pyramid" not in guide_line(octree_grid_mix=0.0)
     for bad in (1.0, -0.1):
         with pytest.raises(ValueError, match="octree_grid_mix"):
             scene.render_forward({name: t}, spp=1, guiding="octree", octree_grid_mix=bad)
+
+
+def test_grid_octaves_option():
+    """The projective grid is a pyramid of grids from R/4 to 4R (grid_octaves 2, said in the
+    summary with its levels and memory); 0 gives the paper's single grid; the path-space baseline is
+    one grid whatever grid_octaves says; bad values are refused."""
+    scene = load(shadow_scene(AREA))
+    name = "box.vertex_positions"
+    t = x_translation(scene, name)
+    scene.set_differentiable([name])
+
+    def guide_line(**kw):
+        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="grid", guiding_seeds=2, **kw)
+        return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+
+    assert "projective grid pyramid of 5 levels, 16x4x8 to 256x64x128 cells" in guide_line()
+    assert "projective grid pyramid of 3 levels, 16x4x8 to 64x16x32 cells" in guide_line(grid_octaves=1, grid_resolution=32)
+    single = guide_line(grid_octaves=0)
+    assert "pyramid" not in single and "projective grid 64x16x32" in single
+    assert "pyramid" not in guide_line(projective=False)
+    # Levels over 4M cells (here 512 x 128 x 256 and 1024 x 256 x 512) are left out, and said so;
+    # a grid over 16M cells is refused.
+    assert "2 finer level(s) left out" in guide_line(grid_resolution=256)
+    with pytest.raises(ValueError, match="exceed the limit"):
+        scene.render_forward({name: t}, spp=1, spp_boundary=1, guiding="grid", grid_resolution=1024)
+    for bad in (-1, 9):
+        with pytest.raises(ValueError, match="grid_octaves"):
+            scene.render_forward({name: t}, spp=1, guiding="grid", grid_octaves=bad)
 
 
 def test_direction_mix_option():
