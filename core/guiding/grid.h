@@ -58,8 +58,8 @@ class BoundaryGrid : public BoundaryGuide {
 // resolution at no evaluation cost (the narrow GGX lobe and thin shadows need it), while the
 // coarse levels spread each projection's mass over the neighbourhood where the seed paths left
 // gaps (docs/reports/projective/README.md). Finer levels over kMaxLevelCells are left out and
-// describe() says so. The density is piecewise
-// constant over the finest level's cells (its regions) when the levels' cells nest.
+// describe() says so. The density is piecewise constant over the finest level's cells (its
+// regions) when the levels' cells nest.
 class GridPyramid : public BoundaryGuide {
  public:
   GridPyramid(std::array<int, 3> resolution, int octaves, const std::vector<Vec3>& points, const std::vector<float>& values,

@@ -368,8 +368,8 @@ def test_projective_guiding_beats_uniform_on_a_near_specular_reflection():
     """The projective-sampling paper's test scene (scenes/projective/sphere.json: a sphere seen
     only in a GGX alpha = 0.005 plane in front of a large emitter), at equal boundary samples: the
     projective grid and the octree must beat uniform sampling of the boundary sample space
-    (measured here over 6 runs: uniform 1.77, projective grid 0.53, octree 0.14 relative RMSE;
-    other seeds 2.57 / 0.25 / 0.22 and 4.16 / 0.20 / 0.18). 256 boundary spp and 128 seed paths
+    (measured here over 6 runs: uniform 1.77, projective grid 0.19, octree 0.11 relative RMSE;
+    0.53 and 0.14 with the single grid before the pyramid). 256 boundary spp and 128 seed paths
     per pixel: at 32 spp from 32 seed paths the estimate's relative variance per sample was about
     8e4 (limn_guide_variance), so 6 runs passed or failed on whether one sample met a rare peak
     (docs/reports/projective/README.md)."""
