@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import warnings
+from functools import partial
 
 import numpy as np
 import pytest
@@ -55,6 +56,20 @@ def check_term(scene, name, t, spp_boundary, off_at_least):
     z_on, z_off = compare(scene, name, t, spp_boundary)
     assert np.abs(z_on).max() < 5.0, z_on
     assert np.abs(z_off).max() > off_at_least, z_off
+
+
+def moving_box():
+    """The box over the floor under the area light (differentiable) and its x translation."""
+    scene = load(shadow_scene(AREA))
+    name = "box.vertex_positions"
+    scene.set_differentiable([name])
+    return scene, name, x_translation(scene, name)
+
+
+def indirect_summary(scene, tangents, **options):
+    """The indirect boundary term's summary line after a 1-spp call from 2 seed paths per pixel."""
+    quiet(scene.render_forward, tangents, spp=1, spp_boundary=1, guiding_seeds=2, **options)
+    return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
 
 
 def x_translation(scene, name):
@@ -152,10 +167,7 @@ def test_sphere_seen_in_a_glossy_reflection():
 
 def area_shadow_with_fd():
     """The box over the floor under the area light, its x translation and 8 FD images."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = x_translation(scene, name)
-    scene.set_differentiable([name])
+    scene, name, t = moving_box()
     fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=1024, seed=k, cache=False) for k in range(8)])
     return scene, name, t, fd
 
@@ -198,10 +210,7 @@ def test_projective_guiding_agrees_with_fd(guiding):
 def test_guides_are_reused_across_calls_until_refresh_or_motion():
     """guide_refresh=k keeps the guide for k calls while the geometry stays put; moving the
     occluder by more than the threshold, or other settings, rebuild it."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = x_translation(scene, name)
-    scene.set_differentiable([name])
+    scene, name, t = moving_box()
     opts = dict(spp=2, spp_boundary=8, guiding="octree", guide_refresh=3, guiding_seeds=32)
     for k in range(4):
         quiet(scene.render_forward, {name: t}, seed=k, **opts)
@@ -223,10 +232,7 @@ def test_seed_paths_per_guide_default_and_explicit():
     """guiding_seeds=None traces an eighth of spp_boundary seed paths per pixel for the projective
     grid, between 32 and 128, and 256 for the octree; an explicit count applies to both; 0 is
     refused."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = x_translation(scene, name)
-    scene.set_differentiable([name])
+    scene, name, t = moving_box()
     pixels = scene.width * scene.height
 
     def seed_paths(spp_boundary=1, **kw):
@@ -246,14 +252,9 @@ def test_seed_paths_per_guide_default_and_explicit():
 def test_octree_grid_mix_option():
     """The octree is sampled in a mixture with the projective grid (half by default, said in the
     summary); 0 samples the octree alone; a share outside [0, 1) is refused."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = x_translation(scene, name)
-    scene.set_differentiable([name])
+    scene, name, t = moving_box()
 
-    def guide_line(**kw):
-        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="octree", guiding_seeds=2, **kw)
-        return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+    guide_line = partial(indirect_summary, scene, {name: t}, guiding="octree")
 
     assert "mixed 50 % with the projective grid pyramid of 5 levels" in guide_line()
     assert "mixed 30 % with the projective grid pyramid" in guide_line(octree_grid_mix=0.3)
@@ -267,14 +268,9 @@ def test_grid_octaves_option():
     """The projective grid is a pyramid of grids from R/4 to 4R (grid_octaves 2, said in the
     summary with its levels and memory); 0 gives the paper's single grid; the path-space baseline is
     one grid whatever grid_octaves says; bad values are refused."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = x_translation(scene, name)
-    scene.set_differentiable([name])
+    scene, name, t = moving_box()
 
-    def guide_line(**kw):
-        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="grid", guiding_seeds=2, **kw)
-        return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+    guide_line = partial(indirect_summary, scene, {name: t}, guiding="grid")
 
     assert "projective grid pyramid of 5 levels, 16x4x8 to 256x64x128 cells" in guide_line()
     assert "projective grid pyramid of 3 levels, 16x4x8 to 64x16x32 cells" in guide_line(grid_octaves=1, grid_resolution=32)
@@ -296,14 +292,9 @@ def test_direction_mix_option():
     (direction_mix, 20 % by default, direction_resolution^2 cells, said in the summary); 0 leaves
     it out; the path-space baseline grid does not use it; the octree's training round samples it
     too; bad values are refused."""
-    scene = load(shadow_scene(AREA))
-    name = "box.vertex_positions"
-    t = x_translation(scene, name)
-    scene.set_differentiable([name])
+    scene, name, t = moving_box()
 
-    def guide_line(**kw):
-        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding_seeds=2, **kw)
-        return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+    guide_line = partial(indirect_summary, scene, {name: t})
 
     for guiding in ("grid", "octree"):
         assert "mixed 20 % with the projective grid over the directions only, 256x256" in guide_line(guiding=guiding)
@@ -344,9 +335,7 @@ def test_octree_training_round_lowers_the_error():
     default 512 per pixel; docs/reports/projective/README.md has the 48x48 scenes)."""
     scene, name, t, ref, rms = near_specular_sphere()
 
-    def guide_line(**kw):
-        quiet(scene.render_forward, {name: t}, spp=1, spp_boundary=1, guiding="octree", guiding_seeds=2, **kw)
-        return next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
+    guide_line = partial(indirect_summary, scene, {name: t}, guiding="octree")
 
     assert f"trained with {512 * 24 * 24} samples of the projective grid" in guide_line()
     assert f"trained with {8 * 24 * 24} samples" in guide_line(octree_training=8)
