@@ -34,18 +34,20 @@ Image render(const Scene& scene, const RenderOptions& options, RenderStats* stat
     uint64_t bad = 0;
     for (int y = y0; y < std::min(y0 + kTile, H); ++y)
       for (int x = x0; x < std::min(x0 + kTile, W); ++x) {
+        // Double sums: a float's rounding grows as sqrt(spp) relative to the pixel and would reach
+        // finite differences of high-spp references divided by a small eps.
         Pcg32 rng = pixel_rng(options.seed, uint64_t(y) * W + x);
-        Spectrum sum(0.0f);
+        glm::dvec3 sum(0.0);
         for (int s = 0; s < spp; ++s) {
           const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();  // box filter over the pixel
           const Spectrum L = path_radiance(scene, scene.camera.generate_ray(film), rng, counters, PathLimits{max_depth, true});
-          if (is_finite(L) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) sum += L;
+          if (is_finite(L) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) sum += glm::dvec3(L);
           else ++bad;
         }
         float* px = &img.rgb[3 * (size_t(y) * W + x)];
-        px[0] = sum.x / spp;
-        px[1] = sum.y / spp;
-        px[2] = sum.z / spp;
+        px[0] = float(sum.x / spp);
+        px[1] = float(sum.y / spp);
+        px[2] = float(sum.z / spp);
       }
     rays += counters.rays;
     invalid += bad;

@@ -146,7 +146,8 @@ def main() -> int:
     ap.add_argument("--budgets", type=int, nargs="+", default=[4, 16, 64], help="Mitsuba's budgets")
     ap.add_argument("--limn-budgets", type=int, nargs="+", default=[4, 16, 64, 256, 1024],
                     help="limn's (larger: limn is faster per sample, the comparison is at equal time)")
-    ap.add_argument("--fd-spp", type=int, default=16384)
+    ap.add_argument("--fd-spp", type=int, default=131072, help="the reference's, as in the bench reports")
+    ap.add_argument("--eps", type=float, default=5e-3, help="the reference's, as in the bench reports")
     ap.add_argument("--runs", type=int, default=2)
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "reports", "projective", "mitsuba.md"))
     ap.add_argument("--worker", nargs=2, metavar=("SCENE", "GUIDING"), help=argparse.SUPPRESS)
@@ -160,8 +161,8 @@ def main() -> int:
              "Regenerate: `.venv/bin/pip install mitsuba==3.7.1 && .venv/bin/python tests/bench/mitsuba_compare.py` "
              "(3.7.1: 3.9 needs a newer LLVM than Debian 12's, 3.5-3.6 fail on meshes)", "",
              f"Mitsuba {mi.__version__} (`llvm_ad_rgb`, integrator `prb_projective`, forward mode) and limn on the same "
-             "machine in one run (2 cores, shared); one finite-difference reference per scene (limn, eps 0.01, "
-             f"{args.fd_spp} spp, cached); relative RMSE = RMSE / RMS of the reference, root mean square over "
+             "machine in one run (2 cores, shared); one finite-difference reference per scene (limn, eps "
+             f"{args.eps}, {args.fd_spp} spp, cached: the bench reports' own); relative RMSE = RMSE / RMS of the reference, root mean square over "
              f"{args.runs} runs with different seeds. Budget: samples per pixel for every term (Mitsuba: sppc = sppp = sppi). "
              "Mitsuba's times exclude its first call per configuration (JIT compilation) and include its guiding; "
              "limn's include its guide set-up.", ""]
@@ -177,7 +178,7 @@ def main() -> int:
         else:
             t[0] = 1.0
         scene.set_differentiable([param])
-        ref = limn.fd(scene, {param: t}, eps=1e-2, spp=args.fd_spp, seed=12345).astype(np.float64)
+        ref = limn.fd(scene, {param: t}, eps=args.eps, spp=args.fd_spp, seed=12345).astype(np.float64)
         rms = float(np.sqrt((ref ** 2).mean()))
         rows = []
         primal_limn = scene.render(spp=1024, seed=5).astype(np.float64)
