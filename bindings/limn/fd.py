@@ -15,11 +15,15 @@ def default_cache_dir() -> str:
 
 def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache: bool | str = True,
        threads: int = 0, max_depth: int | None = None) -> np.ndarray:
-    """(I(theta + eps t) - I(theta - eps t)) / (2 eps) from two primal renders with the same random
-    numbers. ``tangents`` maps parameter names to arrays shaped like the parameters. The parameters
-    are restored afterwards. Results are cached on disk (``cache``: True for the default folder,
-    $LIMN_FD_CACHE or ~/.cache/limn/fd; a path; or False), keyed by the scene's source, every
-    parameter value, the tangents and the settings. ``max_depth`` as in :meth:`Scene.render`."""
+    """(I(theta + eps t) - I(theta - eps t)) / (2 eps) from two primal renders with the same seed.
+    Each pixel draws from one stream, so a path that draws a different count of numbers in the two
+    renders shifts the pixel's later samples: near moving edges the noise grows about as 1/eps, and
+    eps trades it against the bias, O(eps^2) where the image is smooth in theta
+    (docs/reports/projective/reference.md). ``tangents`` maps parameter names to arrays shaped like
+    the parameters. The parameters are restored afterwards. Results are cached on disk (``cache``:
+    True for the default folder, $LIMN_FD_CACHE or ~/.cache/limn/fd; a path; or False), keyed by
+    the scene's source, every parameter value, the tangents and the settings. ``max_depth`` as in
+    :meth:`Scene.render`."""
     if not eps > 0:
         raise ValueError(f"eps must be > 0 (got {eps})")
     base = {}
