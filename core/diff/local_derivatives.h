@@ -4,6 +4,7 @@
 // terms, microfacet distributions and BSDF evaluation (f * |cos wo|, as core/render/bsdfs).
 #pragma once
 #include "core/diff/ad.h"
+#include "core/render/bsdfs/fresnel.h"
 #include "core/render/bsdfs/microfacet.h"
 
 namespace limn::diff {
@@ -57,6 +58,7 @@ template <typename T>
 V3<T> reflect(const V3<T>& w, const V3<T>& m) { return m * (T(2.0) * dot(w, m)) - w; }
 
 // ---- Fresnel --------------------------------------------------------------------------------------
+// (The conductor's is core/render/bsdfs/fresnel.h's fresnel_conductor_real, templated already.)
 // Dielectric reflectance for cos_i (sign: which side), eta = interior / exterior IOR.
 template <typename T>
 T fresnel_dielectric(const T& cos_i, double eta) {
@@ -69,25 +71,6 @@ T fresnel_dielectric(const T& cos_i, double eta) {
   const T rs = (ci - T(eta_it) * ct) / (ci + T(eta_it) * ct);
   const T rp = (T(eta_it) * ci - ct) / (T(eta_it) * ci + ct);
   return T(0.5) * (rs * rs + rp * rp);
-}
-
-// Conductor reflectance for complex IOR eta + i k, in real arithmetic (equal to the complex form
-// of core/render/bsdfs/fresnel.h; the tests check it).
-template <typename T>
-T fresnel_conductor(const T& cos_i0, double eta, double k) {
-  const T cos_i = min(max(cos_i0, T(0.0)), T(1.0));
-  const T c2 = cos_i * cos_i, s2 = T(1.0) - c2;
-  const double e2 = eta * eta, k2 = k * k;
-  const T t0 = T(e2 - k2) - s2;
-  const T a2b2 = sqrt(t0 * t0 + T(4.0 * e2 * k2));
-  const T t1 = a2b2 + c2;
-  const T a = sqrt(max(T(0.5) * (a2b2 + t0), T(0.0)));
-  const T t2 = T(2.0) * cos_i * a;
-  const T rs = (t1 - t2) / (t1 + t2);
-  const T t3 = c2 * a2b2 + s2 * s2;
-  const T t4 = t2 * s2;
-  const T rp = rs * (t3 - t4) / (t3 + t4);
-  return T(0.5) * (rp + rs);
 }
 
 // ---- microfacets ----------------------------------------------------------------------------------
@@ -138,8 +121,8 @@ V3<T> eval_rough_conductor(MicrofacetType type, const T& alpha, const Vec3& eta,
   const T G = microfacet_G1(type, alpha, wi, m) * microfacet_G1(type, alpha, wo, m);
   const T common = D * G / (T(4.0) * wi.z);
   const T cos_h = dot(wi, m);
-  return V3<T>(fresnel_conductor(cos_h, eta.x, k.x) * common * T(tint.x), fresnel_conductor(cos_h, eta.y, k.y) * common * T(tint.y),
-               fresnel_conductor(cos_h, eta.z, k.z) * common * T(tint.z));
+  return V3<T>(fresnel_conductor_real(cos_h, eta.x, k.x) * common * T(tint.x), fresnel_conductor_real(cos_h, eta.y, k.y) * common * T(tint.y),
+               fresnel_conductor_real(cos_h, eta.z, k.z) * common * T(tint.z));
 }
 
 template <typename T>

@@ -1,6 +1,7 @@
 // Fresnel equations for dielectric and conductor interfaces (unpolarised light).
 #pragma once
-#include <complex>
+#include <algorithm>
+#include <cmath>
 #include "core/math/vec.h"
 
 namespace limn {
@@ -26,18 +27,29 @@ inline DielectricFresnel fresnel_dielectric(float cos_i, float eta) {
   return {0.5f * (rs * rs + rp * rp), outside ? -ct : ct, eta_it, eta_ti};
 }
 
-// Exact conductor Fresnel for complex IOR eta + i k, per RGB channel (pbrt-v4's FrComplex form).
-inline float fresnel_conductor(float cos_i, float eta, float k) {
-  using C = std::complex<float>;
-  cos_i = std::clamp(cos_i, 0.0f, 1.0f);
-  const C n(eta, k);
-  const float sin2_i = 1.0f - cos_i * cos_i;
-  const C sin2_t = sin2_i / (n * n);
-  const C cos_t = std::sqrt(C(1.0f) - sin2_t);
-  const C r_parl = (n * cos_i - cos_t) / (n * cos_i + cos_t);
-  const C r_perp = (cos_i - n * cos_t) / (cos_i + n * cos_t);
-  return 0.5f * (std::norm(r_parl) + std::norm(r_perp));
+// Exact conductor Fresnel for complex IOR eta + i k (unpolarised), in real arithmetic: the
+// complex form (pbrt-v4's FrComplex) costs libgcc's __divsc3 / csqrtf calls, 11 % of a render.
+// Templated so that core/diff's tape type (unqualified sqrt, min, max found by ADL) and double
+// share it. Equal to the complex form within float rounding (tests/cpp/render/test_bsdf.cpp).
+template <typename T>
+T fresnel_conductor_real(const T& cos_i0, double eta, double k) {
+  using std::max, std::min, std::sqrt;
+  const T cos_i = min(max(cos_i0, T(0.0)), T(1.0));
+  const T c2 = cos_i * cos_i, s2 = T(1.0) - c2;
+  const double e2 = eta * eta, k2 = k * k;
+  const T t0 = T(e2 - k2) - s2;                   // Re((eta + i k)^2) - sin^2
+  const T a2b2 = sqrt(t0 * t0 + T(4.0 * e2 * k2));  // |n^2 - sin^2| = a^2 + b^2
+  const T t1 = a2b2 + c2;
+  const T a = sqrt(max(T(0.5) * (a2b2 + t0), T(0.0)));
+  const T t2 = T(2.0) * cos_i * a;
+  const T rs = (t1 - t2) / (t1 + t2);
+  const T t3 = c2 * a2b2 + s2 * s2;
+  const T t4 = t2 * s2;
+  const T rp = rs * (t3 - t4) / (t3 + t4);
+  return T(0.5) * (rp + rs);
 }
+
+inline float fresnel_conductor(float cos_i, float eta, float k) { return fresnel_conductor_real(cos_i, eta, k); }
 
 inline Spectrum fresnel_conductor(float cos_i, const Spectrum& eta, const Spectrum& k) {
   return Spectrum(fresnel_conductor(cos_i, eta.x, k.x), fresnel_conductor(cos_i, eta.y, k.y),

@@ -2,7 +2,9 @@
 // reciprocity of reflection models, a chi-square test of the sampled directions, Fresnel limits.
 #include <doctest/doctest.h>
 
+#include <complex>
 #include <map>
+#include <vector>
 #include "core/math/rng.h"
 #include "core/math/warp.h"
 #include "core/render/bsdfs/bsdf.h"
@@ -199,6 +201,25 @@ TEST_CASE("fresnel: normal incidence and total internal reflection") {
   const float n = 0.2f, k = 3.9f;
   CHECK(fresnel_conductor(1.0f, n, k) == doctest::Approx(((n - 1) * (n - 1) + k * k) / ((n + 1) * (n + 1) + k * k)).epsilon(1e-4));
   CHECK(fresnel_conductor(0.3f, 0.0f, 1.0f) == doctest::Approx(1.0f).epsilon(1e-5));
+}
+
+TEST_CASE("fresnel: the real-arithmetic conductor form equals the complex Fresnel equations") {
+  // Reference: r_s and r_p from the complex IOR in double-precision complex arithmetic.
+  auto complex_form = [](double cos_i, double eta, double k) {
+    using C = std::complex<double>;
+    const C n(eta, k);
+    const C cos_t = std::sqrt(C(1.0) - (1.0 - cos_i * cos_i) / (n * n));
+    const C r_parl = (n * cos_i - cos_t) / (n * cos_i + cos_t), r_perp = (cos_i - n * cos_t) / (cos_i + n * cos_t);
+    return 0.5 * (std::norm(r_parl) + std::norm(r_perp));
+  };
+  for (const auto& [eta, k] : std::vector<std::pair<float, float>>{{0.2f, 3.9f}, {1.6f, 9.2f}, {0.14f, 3.98f}, {2.9f, 3.1f}, {1.5f, 0.0f}})
+    for (float ci : {0.0f, 1e-4f, 0.05f, 0.3f, 0.7f, 0.99f, 1.0f}) {
+      CAPTURE(eta);
+      CAPTURE(k);
+      CAPTURE(ci);
+      CHECK(fresnel_conductor(ci, eta, k) == doctest::Approx(complex_form(ci, eta, k)).epsilon(1e-5));
+      CHECK(fresnel_conductor_real(double(ci), eta, k) == doctest::Approx(complex_form(ci, eta, k)).epsilon(1e-12));
+    }
 }
 
 TEST_CASE("bsdfs: the side of a diffuse surface is the geometric one") {
