@@ -63,20 +63,24 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
     rows, summary = [], {}
     for m in methods:
         for b in budgets:
-            secs, guide, rmse, mae = [], [], [], []
+            secs, guide, rmse, mae, images = [], [], [], [], []
             for r in range(runs):
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     img = scene.render_forward(t, spp=b, seed=seed + 1000 * r, **METHODS[m])
                 st = scene.last_stats
-                err = img.astype(np.float64) - reference
+                images.append(img.astype(np.float64))
+                err = images[-1] - reference
                 secs.append(st["seconds"])
                 guide.append(guide_seconds(st["summary"]))
                 rmse.append(float(np.sqrt((err ** 2).mean())) / ref_rms)
                 mae.append(float(np.abs(err).mean()) / ref_rms)
-            # Means over runs: the RMSE as the root of the mean squared error, so outliers count.
+            # Means over runs: the RMSE as the root of the mean squared error, so outliers count. The
+            # noise is the estimator's own standard deviation (pixel RMS of the sample variance over
+            # the runs): the RMSE a reference without error would give, as the estimators are unbiased.
+            noise = float(np.sqrt(np.var(np.stack(images), axis=0, ddof=1).mean())) / ref_rms if runs > 1 else float("nan")
             rows.append((m, b, float(np.mean(secs)), float(np.sqrt(np.mean(np.square(rmse)))), float(np.mean(mae)),
-                         float(np.mean(guide)), float(np.max(rmse))))
+                         float(np.mean(guide)), float(np.max(rmse)), noise))
             summary[m] = st["summary"]
     name = os.path.splitext(os.path.basename(scene_path))[0]
     os.makedirs(out, exist_ok=True)
@@ -90,10 +94,13 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
              "random points per cell; `projective_grid` and `octree` filled from projected seeds (`octree_untrained`: "
              "from the projections alone, as in the paper; `octree`: with the training round's points too).", "",
-             "| method | budget (spp) | time (s) | guide set-up (s) | relative RMSE | worst run | relative MAE |",
-             "|---|---|---|---|---|---|---|"]
-    for m, b, sec, rmse, mae, guide, worst in rows:
-        lines.append(f"| {m} | {b} | {sec:.3f} | {guide:.3f} | {rmse:.4f} | {worst:.4f} | {mae:.4f} |")
+             "Run-to-run noise: the pixel RMS of the standard deviation over the runs, relative to the reference's RMS "
+             "(the error against a reference without error of its own; the RMSE also holds the reference's error).", "",
+             "| method | budget (spp) | time (s) | guide set-up (s) | relative RMSE | worst run | relative MAE | run-to-run noise |",
+             "|---|---|---|---|---|---|---|---|"]
+    for m, b, sec, rmse, mae, guide, worst, noise in rows:
+        lines.append(f"| {m} | {b} | {sec:.3f} | {guide:.3f} | {rmse:.4f} | {worst:.4f} | {mae:.4f} | "
+                     + (f"{noise:.4f} |" if noise == noise else "n/a (1 run) |"))
     lines += ["", "Terms per method (the renderer's own summary):", ""]
     for m, s in summary.items():
         lines.append(f"- **{m}**: " + "; ".join(s))
@@ -105,15 +112,17 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        fig, ax = plt.subplots(figsize=(5, 3.6))
-        for m in methods:
-            pts = [(r[2], r[3]) for r in rows if r[0] == m]
-            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=m)
-        ax.set_xlabel("render_forward time (s)")
-        ax.set_ylabel("relative RMSE vs FD")
-        ax.set_title(name)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
+        panels = [(3, "relative RMSE vs FD")] + ([(7, "run-to-run noise")] if runs > 1 else [])
+        fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 3.6), squeeze=False)
+        for ax, (col, label) in zip(axes[0], panels):
+            for m in methods:
+                pts = [(r[2], r[col]) for r in rows if r[0] == m]
+                ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=m)
+            ax.set_xlabel("render_forward time (s)")
+            ax.set_ylabel(label)
+            ax.set_title(f"{name}: {label}")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=7)
         fig.tight_layout()
         fig.savefig(os.path.join(out, name + ".png"), dpi=120)
         plt.close(fig)

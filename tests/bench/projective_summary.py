@@ -23,12 +23,13 @@ STEPS = [("projective grid over the baseline grid 1x", "grid", "projective_grid"
 
 def read_rows(path: str, column: int) -> dict[tuple[str, int], tuple[float, float]]:
     """{(method, budget): (time, error)} from a bench report's table (column 4: relative RMSE,
-    the root mean square over the runs; 6: relative MAE, the mean over the runs)."""
+    the root mean square over the runs; 6: relative MAE, the mean over the runs; 7: run-to-run
+    noise, the estimator's standard deviation)."""
     rows = {}
     with open(path) as f:
         for line in f:
             cells = [c.strip() for c in line.strip().strip("|").split("|")]
-            if len(cells) == 7 and cells[1].isdigit():
+            if len(cells) >= 7 and cells[1].isdigit() and column < len(cells) and not cells[column].startswith("n/a"):
                 rows[(cells[0], int(cells[1]))] = (float(cells[2]), float(cells[column]))
     return rows
 
@@ -43,7 +44,8 @@ def main() -> None:
     ap.add_argument("--budget", type=int, default=1024, help="the rows (samples per pixel) to compare")
     ap.add_argument("--dir", default=os.path.join("docs", "reports", "projective"))
     args = ap.parse_args()
-    for column, measure in ((4, "RMSE (L2; single outlier runs dominate it)"), (6, "MAE (L1)")):
+    for column, measure in ((4, "RMSE (L2; single outlier runs dominate it)"), (6, "MAE (L1)"),
+                            (7, "run-to-run noise (the RMSE against a reference without error: the estimators are unbiased)")):
         tables = {s: read_rows(os.path.join(args.dir, s + ".md"), column) for s in SCENES if os.path.exists(os.path.join(args.dir, s + ".md"))}
         print(f"Equal-time gains in relative {measure} at the {args.budget}-spp rows (error ratio after scaling by time^-1/2):\n")
         print("| step | " + " | ".join(tables) + " | geometric mean |")

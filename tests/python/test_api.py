@@ -182,6 +182,22 @@ def test_cli_render(tmp_path):
     assert bad.returncode == 2 and "missing.json" in bad.stderr
 
 
+def test_cli_bench_writes_the_table_with_noise(tmp_path):
+    out = tmp_path / "report"
+    args = [sys.executable, "-m", "limn", "bench", os.path.join(SCENES, "projective", "sphere.json"), "--param", "shape.center",
+            "--methods", "projective_grid", "--budgets", "1", "4", "--fd-spp", "8", "--eps", "0.01", "--runs", "2", "--out", str(out)]
+    env = dict(os.environ, LIMN_FD_CACHE=str(tmp_path / "fd"))
+    r = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, env=env)
+    assert r.returncode == 0, r.stderr
+    rows = [line.strip("|").split("|") for line in (out / "sphere.md").read_text().splitlines() if line.startswith("| projective_grid |")]
+    assert [int(c[1]) for c in rows] == [1, 4]
+    for c in rows:
+        rmse, noise = float(c[4]), float(c[7])
+        assert np.isfinite(noise) and 0.0 < noise and np.isfinite(rmse) and rmse > 0.0
+    bad = subprocess.run(args[:7] + ["--methods", "octre"] + args[9:], capture_output=True, text=True, cwd=ROOT, env=env)
+    assert bad.returncode != 0 and "unknown method 'octre'" in bad.stderr
+
+
 def test_max_depth_zero_is_black(scene_dict):
     scene_dict["integrator"]["max_depth"] = 0
     assert limn.load_dict(scene_dict).render().max() == 0.0
