@@ -8,6 +8,9 @@
 // guide misses; q's own relative variance is printed as a check. The integrand f is the guides'
 // (IndirectBoundary::guide_value, without the tangent's velocity). Also printed: the least relative
 // variance any grid of the default shape can reach, from the same samples. Markdown on stdout.
+// `--tail K` also lists the K samples that carry most of the default octree's (first seed) second
+// moment: where on which segment, towards which direction, f and the guide's density there.
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -24,15 +27,16 @@ using namespace limn;
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K]\n", argv[0]);
     return 2;
   }
-  int seeds = 4, qspp = 2048, spp = 1024;
+  int seeds = 4, qspp = 2048, spp = 1024, tail = 0;
   for (int a = 3; a + 1 < argc; a += 2) {
     const std::string k = argv[a];
     if (k == "--seeds") seeds = std::stoi(argv[a + 1]);
     else if (k == "--qspp") qspp = std::stoi(argv[a + 1]);
     else if (k == "--spp") spp = std::stoi(argv[a + 1]);
+    else if (k == "--tail") tail = std::stoi(argv[a + 1]);
     else {
       std::fprintf(stderr, "unknown option %s\n", argv[a]);
       return 2;
@@ -125,6 +129,31 @@ int main(int argc, char** argv) {
                     mix > 0.0f ? (std::to_string(int(mix * 100.0f + 0.5f)) + " %").c_str() : "off", cells.c_str(), sum);
         std::fflush(stdout);
       }
+    if (tail > 0) {
+      // Each sample's share of E_p[(f/p)^2] = E_q[f^2 / (p q)] for the default octree guide.
+      const auto p = build_boundary_guide(*scene, ib, options("octree", kDirectionMix, 7));
+      std::vector<double> share(M, 0.0);
+      double m2 = 0.0;
+      for (size_t i = 0; i < M; ++i) {
+        const float pu = p->pdf(u[i]);
+        share[i] = pu > 0.0f ? f2q[i] / pu / double(M) : 0.0;
+        m2 += share[i];
+      }
+      std::vector<size_t> order(M);
+      for (size_t i = 0; i < M; ++i) order[i] = i;
+      const size_t K = std::min(M, size_t(tail));
+      std::partial_sort(order.begin(), order.begin() + K, order.end(), [&](size_t a, size_t b) { return share[a] > share[b]; });
+      std::printf("\nSamples carrying most of the default octree's second moment (guide seed 7; f / F with F the integral, "
+                  "p the guide's density on [0,1)^3):\n\n| share | u | segment | lambda or normal | w | f / F | p |\n|---|---|---|---|---|---|---|\n");
+      for (size_t k = 0; k < K; ++k) {
+        const size_t i = order[k];
+        BoundaryPoint b;
+        const bool ok = ib.space().sample(u[i], 1.0f, b);
+        std::printf("| %.2g %% | %.6f %.5f %.5f | %d | %.4f %.4f %.4f | %.4f %.4f %.4f | %.3g | %.4g |\n", 100.0 * share[i] / m2,
+                    u[i].x, u[i].y, u[i].z, ok ? b.segment : -1, b.param.x, b.param.y, b.param.z, b.w.x, b.w.y, b.w.z,
+                    fq[i] * q->pdf(u[i]) / F, p->pdf(u[i]));
+      }
+    }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 1;
