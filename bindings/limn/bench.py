@@ -60,28 +60,32 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
     reference = fd(scene, t, eps=eps, spp=fd_spp, seed=seed + 12345)
     t_ref = time.perf_counter() - t0
     ref_rms = float(np.sqrt((reference.astype(np.float64) ** 2).mean())) or 1.0
-    rows, summary = [], {}
-    for m in methods:
-        for b in budgets:
-            secs, guide, rmse, mae, images = [], [], [], [], []
-            for r in range(runs):
+    # Runs interleaved (for each budget and run, every method in turn): a shared machine's speed
+    # drifts by tens of per cent over a bench, and every method should see the same drift.
+    samples = {(m, b): [] for m in methods for b in budgets}
+    summary = {}
+    for b in budgets:
+        for r in range(runs):
+            print(f"bench {os.path.basename(scene_path)}: {b} spp, run {r + 1} of {runs}", file=sys.stderr, flush=True)
+            for m in methods:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     img = scene.render_forward(t, spp=b, seed=seed + 1000 * r, **METHODS[m])
                 st = scene.last_stats
-                images.append(img.astype(np.float64))
-                err = images[-1] - reference
-                secs.append(st["seconds"])
-                guide.append(guide_seconds(st["summary"]))
-                rmse.append(float(np.sqrt((err ** 2).mean())) / ref_rms)
-                mae.append(float(np.abs(err).mean()) / ref_rms)
-            # Means over runs: the RMSE as the root of the mean squared error, so outliers count. The
-            # noise is the estimator's own standard deviation (pixel RMS of the sample variance over
-            # the runs): the RMSE a reference without error would give, as the estimators are unbiased.
-            noise = float(np.sqrt(np.var(np.stack(images), axis=0, ddof=1).mean())) / ref_rms if runs > 1 else float("nan")
-            rows.append((m, b, float(np.mean(secs)), float(np.sqrt(np.mean(np.square(rmse)))), float(np.mean(mae)),
-                         float(np.mean(guide)), float(np.max(rmse)), noise))
-            summary[m] = st["summary"]
+                samples[(m, b)].append((img.astype(np.float64), st["seconds"], guide_seconds(st["summary"])))
+                summary[m] = st["summary"]
+    rows = []
+    for (m, b), runs_mb in samples.items():
+        images = np.stack([x[0] for x in runs_mb])
+        err = images - reference
+        rmse = np.sqrt((err ** 2).mean(axis=(1, 2, 3))) / ref_rms
+        mae = np.abs(err).mean(axis=(1, 2, 3)) / ref_rms
+        # Means over runs: the RMSE as the root of the mean squared error, so outliers count. The
+        # noise is the estimator's own standard deviation (pixel RMS of the sample variance over
+        # the runs): the RMSE a reference without error would give, as the estimators are unbiased.
+        noise = float(np.sqrt(np.var(images, axis=0, ddof=1).mean())) / ref_rms if runs > 1 else float("nan")
+        rows.append((m, b, float(np.mean([x[1] for x in runs_mb])), float(np.sqrt(np.mean(rmse ** 2))), float(np.mean(mae)),
+                     float(np.mean([x[2] for x in runs_mb])), float(np.max(rmse)), noise))
     name = os.path.splitext(os.path.basename(scene_path))[0]
     os.makedirs(out, exist_ok=True)
     command = "python3 -m limn " + " ".join(shlex.quote(a) for a in (argv or []))
@@ -90,7 +94,7 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
              f"Parameter `{param}`, tangent `{tangent}`; reference: central differences, eps {eps}, {fd_spp} spp "
              f"({t_ref:.1f} s, cached). Errors are relative to the reference's RMS. Film {scene.width}x{scene.height}; "
              f"budget = samples per pixel for every term computed. {runs} run(s) per row on a shared 2-core machine "
-             f"(seeds differ); time includes building the guide.", "",
+             f"(seeds differ; for each budget and run every method in turn, so that they share the machine's drift); time includes building the guide.", "",
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
              "random points per cell; `projective_grid` and `octree` filled from projected seeds (`octree_untrained`: "
              "from the projections alone, as in the paper; `octree`: with the training round's points too).", "",
