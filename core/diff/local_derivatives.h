@@ -58,7 +58,7 @@ template <typename T>
 V3<T> reflect(const V3<T>& w, const V3<T>& m) { return m * (T(2.0) * dot(w, m)) - w; }
 
 // ---- Fresnel --------------------------------------------------------------------------------------
-// (The conductor's is core/render/bsdfs/fresnel.h's fresnel_conductor_real, templated already.)
+// (The conductor's is core/render/bsdfs/fresnel.h's templated fresnel_conductor.)
 // Dielectric reflectance for cos_i (sign: which side), eta = interior / exterior IOR.
 template <typename T>
 T fresnel_dielectric(const T& cos_i, double eta) {
@@ -121,8 +121,8 @@ V3<T> eval_rough_conductor(MicrofacetType type, const T& alpha, const Vec3& eta,
   const T G = microfacet_G1(type, alpha, wi, m) * microfacet_G1(type, alpha, wo, m);
   const T common = D * G / (T(4.0) * wi.z);
   const T cos_h = dot(wi, m);
-  return V3<T>(fresnel_conductor_real(cos_h, eta.x, k.x) * common * T(tint.x), fresnel_conductor_real(cos_h, eta.y, k.y) * common * T(tint.y),
-               fresnel_conductor_real(cos_h, eta.z, k.z) * common * T(tint.z));
+  return V3<T>(fresnel_conductor(cos_h, eta.x, k.x) * common * T(tint.x), fresnel_conductor(cos_h, eta.y, k.y) * common * T(tint.y),
+               fresnel_conductor(cos_h, eta.z, k.z) * common * T(tint.z));
 }
 
 template <typename T>

@@ -234,9 +234,9 @@ struct Replay {
     if (const auto* c = std::get_if<Conductor>(&b.model)) {
       wo_world = diff::reflect(wi_world, x.ns);
       const Var ci = abs(cos_i);  // twosided conductors reflect on either side
-      return VV(fresnel_conductor_real(ci, c->eta.x, c->k.x) * Var(c->specular_reflectance.x),
-                fresnel_conductor_real(ci, c->eta.y, c->k.y) * Var(c->specular_reflectance.y),
-                fresnel_conductor_real(ci, c->eta.z, c->k.z) * Var(c->specular_reflectance.z));
+      return VV(fresnel_conductor(ci, c->eta.x, c->k.x) * Var(c->specular_reflectance.x),
+                fresnel_conductor(ci, c->eta.y, c->k.y) * Var(c->specular_reflectance.y),
+                fresnel_conductor(ci, c->eta.z, c->k.z) * Var(c->specular_reflectance.z));
     }
     const auto& d = std::get<Dielectric>(b.model);
     const Var F = diff::fresnel_dielectric(cos_i, double(d.eta));

@@ -32,7 +32,7 @@ inline DielectricFresnel fresnel_dielectric(float cos_i, float eta) {
 // Templated so that core/diff's tape type (unqualified sqrt, min, max found by ADL) and double
 // share it. Equal to the complex form within float rounding (tests/cpp/render/test_bsdf.cpp).
 template <typename T>
-T fresnel_conductor_real(const T& cos_i0, double eta, double k) {
+T fresnel_conductor(const T& cos_i0, double eta, double k) {
   using std::max, std::min, std::sqrt;
   const T cos_i = min(max(cos_i0, T(0.0)), T(1.0));
   const T c2 = cos_i * cos_i, s2 = T(1.0) - c2;
@@ -48,8 +48,6 @@ T fresnel_conductor_real(const T& cos_i0, double eta, double k) {
   const T rp = rs * (t3 - t4) / (t3 + t4);
   return T(0.5) * (rp + rs);
 }
-
-inline float fresnel_conductor(float cos_i, float eta, float k) { return fresnel_conductor_real(cos_i, eta, k); }
 
 inline Spectrum fresnel_conductor(float cos_i, const Spectrum& eta, const Spectrum& k) {
   return Spectrum(fresnel_conductor(cos_i, eta.x, k.x), fresnel_conductor(cos_i, eta.y, k.y),

@@ -218,7 +218,7 @@ TEST_CASE("fresnel: the real-arithmetic conductor form equals the complex Fresne
       CAPTURE(k);
       CAPTURE(ci);
       CHECK(fresnel_conductor(ci, eta, k) == doctest::Approx(complex_form(ci, eta, k)).epsilon(1e-5));
-      CHECK(fresnel_conductor_real(double(ci), eta, k) == doctest::Approx(complex_form(ci, eta, k)).epsilon(1e-12));
+      CHECK(fresnel_conductor(double(ci), eta, k) == doctest::Approx(complex_form(ci, eta, k)).epsilon(1e-12));
     }
 }
 
