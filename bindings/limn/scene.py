@@ -121,6 +121,7 @@ class Scene:
                     "guiding_spp": 4, "guiding_seeds": None,
                     "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
                     "octree_grid_mix": 0.5, "octree_training": 512, "direction_mix": 0.2, "direction_resolution": 256,
+                    "direction_octaves": 2,
                     "guide_refresh": 0, "guide_refresh_threshold": 0.02,
                     "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
                     "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True,
@@ -145,8 +146,9 @@ class Scene:
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
-        if not (0 <= int(opts["grid_octaves"]) <= 8):
-            raise ValueError(f"grid_octaves must be in [0, 8] (got {opts['grid_octaves']})")
+        for name in ("grid_octaves", "direction_octaves"):
+            if not (0 <= int(opts[name]) <= 8):
+                raise ValueError(f"{name} must be in [0, 8] (got {opts[name]})")
         if int(opts["octree_training"]) < 0:
             raise ValueError(f"octree_training must be >= 0 (got {opts['octree_training']})")
         for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples", "direction_resolution"):
@@ -208,10 +210,13 @@ class Scene:
         - ``direction_mix`` (projective grid and octree, default 0.2): the share of the projections'
           direction histogram in the mixture (the octree's and the grid's shares above are of the rest),
           ``direction_resolution`` squared cells (default 256, at most 4096) over the sample space's second
-          and third coordinates (the direction for mesh edges), uniform along the first. In a near-specular
-          chain every silhouette edge's integrand peaks at nearly the same directions, so it covers the
-          peaks of edges the projections missed, which the grid and the octree hold at the defensive
-          density only (0: off; docs/reports/projective/README.md).
+          and third coordinates (the direction for mesh edges), uniform along the first, and
+          ``direction_octaves`` (default 2) coarser histograms of a half, a quarter ... of that
+          resolution, with equal shares. In a near-specular chain every silhouette edge's integrand
+          peaks at nearly the same directions, so it covers the peaks of edges the projections missed,
+          which the grid and the octree hold at the defensive density only; the coarser histograms
+          cover the GGX lobe's long tails next to the cells the projections filled (0: off;
+          docs/reports/projective/README.md).
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``grid_octaves`` (projective grid and the octree's grid, default 2): the projections fill

@@ -104,6 +104,7 @@ DiffOptions diff_options(const py::dict& options) {
     else if (k == "octree_training") o.octree_training = value.cast<int>();
     else if (k == "direction_mix") o.direction_mix = value.cast<float>();
     else if (k == "direction_resolution") o.direction_resolution = value.cast<int>();
+    else if (k == "direction_octaves") o.direction_octaves = value.cast<int>();
     else if (k == "guide_refresh") o.guide_refresh = value.cast<int>();
     else if (k == "guide_refresh_threshold") o.guide_refresh_threshold = value.cast<float>();
     else if (k == "heightfield_mipmap") o.heightfield.search.use_mipmap = value.cast<bool>();

@@ -75,6 +75,8 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
     throw std::invalid_argument(scene.source + ": octree_grid_mix must be in [0, 1) (got " + std::to_string(opt.octree_grid_mix) + ")");
   if (!(opt.direction_mix >= 0.0f && opt.direction_mix < 1.0f))
     throw std::invalid_argument(scene.source + ": direction_mix must be in [0, 1) (got " + std::to_string(opt.direction_mix) + ")");
+  if (opt.direction_octaves < 0 || opt.direction_octaves > 8)
+    throw std::invalid_argument(scene.source + ": direction_octaves must be in [0, 8] (got " + std::to_string(opt.direction_octaves) + ")");
   if (opt.direction_resolution < 1 || opt.direction_resolution > BoundaryGrid::kMaxResolution)
     throw std::invalid_argument(scene.source + ": direction_resolution must be in [1, " + std::to_string(BoundaryGrid::kMaxResolution) +
                                 "] (got " + std::to_string(opt.direction_resolution) + ")");
@@ -329,13 +331,13 @@ void build_guide(const Scene& scene, const IndirectBoundary& ib, const DiffOptio
     });
   });
   // The projections' values fill a pyramid of grids around the grid's resolution (GridPyramid).
-  auto grid = std::make_shared<GridPyramid>(res, opt.grid_octaves, points, values);
+  auto grid = std::make_shared<GridPyramid>(res, opt.grid_octaves, opt.grid_octaves, points, values);
   // The projections' directions alone (DiffOptions::direction_mix): uniform along u.x, so that it
-  // covers the edges the projections missed.
-  std::shared_ptr<const BoundaryGrid> directions;
+  // covers the edges the projections missed, with coarser levels for the lobes' tails.
+  std::shared_ptr<const BoundaryGuide> directions;
   if (opt.direction_mix > 0.0f) {
     const int D = opt.direction_resolution;
-    directions = std::make_shared<BoundaryGrid>(std::array<int, 3>{1, D, D}, points, values);
+    directions = std::make_shared<GridPyramid>(std::array<int, 3>{1, D, D}, opt.direction_octaves, 0, points, values);
   }
   auto with_directions = [&](std::shared_ptr<const BoundaryGuide> g) -> std::shared_ptr<const BoundaryGuide> {
     return directions ? std::make_shared<GuideMixture>(std::move(g), directions, opt.direction_mix) : g;
@@ -390,7 +392,7 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
                           std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "," +
                           std::to_string(opt.octree_grid_mix) + "," + std::to_string(opt.octree_training) + "|" +
-                          std::to_string(opt.direction_mix) + "," + std::to_string(opt.direction_resolution) + "|" +
+                          std::to_string(opt.direction_mix) + "," + std::to_string(opt.direction_resolution) + "," + std::to_string(opt.direction_octaves) + "|" +
                           std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);
   float extent = 0.0f;
   const std::vector<float> geometry = moving_geometry(scene, params, extent);

@@ -133,10 +133,11 @@ float BoundaryGrid::pdf_first(float p0) const {
   return m_first[i0] * float(m_res[0]);
 }
 
-GridPyramid::GridPyramid(std::array<int, 3> res, int octaves, const std::vector<Vec3>& points, const std::vector<float>& values,
+GridPyramid::GridPyramid(std::array<int, 3> res, int coarser, int finer, const std::vector<Vec3>& points, const std::vector<float>& values,
                          float defensive) {
-  if (octaves < 0 || octaves > 8) throw std::invalid_argument("grid guiding: grid_octaves must be in [0, 8] (got " + std::to_string(octaves) + ")");
-  for (int k = -octaves; k <= octaves; ++k) {
+  for (int octaves : {coarser, finer})
+    if (octaves < 0 || octaves > 8) throw std::invalid_argument("grid guiding: octaves must be in [0, 8] (got " + std::to_string(octaves) + ")");
+  for (int k = -coarser; k <= finer; ++k) {
     std::array<int, 3> level;
     size_t cells = 1;
     for (int a = 0; a < 3; ++a) {
@@ -188,9 +189,12 @@ size_t GridPyramid::memory_bytes() const {
 
 std::string GridPyramid::describe() const {
   if (m_levels.size() == 1 && m_left_out == 0) return m_levels[0].describe();
-  std::string s = "projective grid pyramid of " + std::to_string(m_levels.size()) + " levels, " + cells_text(m_levels.front().resolution()) + " to " +
-                  cells_text(m_levels.back().resolution()) + " cells, equal shares (" + std::to_string(m_levels.back().empty_cells()) + " of " +
-                  std::to_string(m_levels.back().cell_count()) + " finest cells empty)";
+  const auto first = m_levels.front().resolution(), last = m_levels.back().resolution();
+  const bool directions_only = last[0] == 1;  // the direction histogram's coarser levels (DiffOptions::direction_octaves)
+  auto text = [&](const std::array<int, 3>& r) { return directions_only ? std::to_string(r[1]) + "x" + std::to_string(r[2]) : cells_text(r); };
+  std::string s = std::string("projective grid ") + (directions_only ? "over the directions only, " : "") + "pyramid of " +
+                  std::to_string(m_levels.size()) + " levels, " + text(first) + " to " + text(last) + " cells, equal shares (" +
+                  std::to_string(m_levels.back().empty_cells()) + " of " + std::to_string(m_levels.back().cell_count()) + " finest cells empty)";
   if (m_left_out > 0)
     s += ", " + std::to_string(m_left_out) + " finer level(s) left out (over " + std::to_string(kMaxLevelCells) + " cells)";
   return s;

@@ -53,7 +53,7 @@ class BoundaryGrid : public BoundaryGuide {
 };
 
 // The projective grid as a pyramid (not in the paper): grids of R 2^k x R/4 2^k x R/2 2^k cells for
-// k = -octaves..octaves, all filled from the same projections and sampled with equal shares. A
+// k = -coarser..finer, all filled from the same projections and sampled with equal shares. A
 // projection costs one integrand evaluation whatever the cell size, so the fine levels add
 // resolution at no evaluation cost (the narrow GGX lobe and thin shadows need it), while the
 // coarse levels spread each projection's mass over the neighbourhood where the seed paths left
@@ -62,7 +62,7 @@ class BoundaryGrid : public BoundaryGuide {
 // regions) when the levels' cells nest.
 class GridPyramid : public BoundaryGuide {
  public:
-  GridPyramid(std::array<int, 3> resolution, int octaves, const std::vector<Vec3>& points, const std::vector<float>& values,
+  GridPyramid(std::array<int, 3> resolution, int coarser, int finer, const std::vector<Vec3>& points, const std::vector<float>& values,
               float defensive = 0.1f);
 
   Vec3 sample(const Vec3d& u, float* pdf) const override;

@@ -1,5 +1,7 @@
 // Relative variance of the indirect boundary estimate under each projective guide, rare tails
-// included: `limn_guide_variance scene.json param [--seeds K] [--qspp N] [--spp B]`.
+// included: `limn_guide_variance scene.json param [--seeds K] [--qspp N] [--spp B] [--grid-mix X]
+// [--direction-resolution D]` (the last two set DiffOptions::octree_grid_mix and
+// direction_resolution of the guides under test, not of the wide proposal).
 //
 // A render of a few million samples rarely meets a guide's worst region (an edge's specular peak
 // that no projection reached), so render errors over a few runs hide it. Here the second moment
@@ -27,16 +29,20 @@ using namespace limn;
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D]\n", argv[0]);
     return 2;
   }
   int seeds = 4, qspp = 2048, spp = 1024, tail = 0;
+  DiffOptions tested;  // settings of the guides under test
   for (int a = 3; a + 1 < argc; a += 2) {
     const std::string k = argv[a];
     if (k == "--seeds") seeds = std::stoi(argv[a + 1]);
     else if (k == "--qspp") qspp = std::stoi(argv[a + 1]);
     else if (k == "--spp") spp = std::stoi(argv[a + 1]);
     else if (k == "--tail") tail = std::stoi(argv[a + 1]);
+    else if (k == "--grid-mix") tested.octree_grid_mix = std::stof(argv[a + 1]);
+    else if (k == "--direction-resolution") tested.direction_resolution = std::stoi(argv[a + 1]);
+    else if (k == "--direction-octaves") tested.direction_octaves = std::stoi(argv[a + 1]);
     else {
       std::fprintf(stderr, "unknown option %s\n", argv[a]);
       return 2;
@@ -48,8 +54,13 @@ int main(int argc, char** argv) {
     const IndirectBoundary ib(*scene, params, effective_max_depth(*scene, kSceneMaxDepth));
     DiffOptions base;
     base.spp_boundary = spp;  // the projective grid's seed paths follow the boundary budget (seeds_per_pixel)
-    auto options = [&](const std::string& guiding, float direction_mix, uint64_t seed) {
+    auto options = [&](const std::string& guiding, float direction_mix, uint64_t seed, bool under_test = false) {
       DiffOptions o = base;
+      if (under_test) {
+        o.octree_grid_mix = tested.octree_grid_mix;
+        o.direction_resolution = tested.direction_resolution;
+        o.direction_octaves = tested.direction_octaves;
+      }
       o.guiding = guiding;
       o.direction_mix = direction_mix;
       o.seed = seed;
@@ -113,7 +124,7 @@ int main(int argc, char** argv) {
         std::string cells;
         double sum = 0.0;
         for (int t = 0; t < seeds; ++t) {
-          const auto p = build_boundary_guide(*scene, ib, options(guiding, mix, 7 + 1000 * uint64_t(t)));
+          const auto p = build_boundary_guide(*scene, ib, options(guiding, mix, 7 + 1000 * uint64_t(t), true));
           std::vector<double> part(M);
           tbb::parallel_for(size_t(0), M, [&](size_t i) {
             const float pu = p->pdf(u[i]);
@@ -131,7 +142,7 @@ int main(int argc, char** argv) {
       }
     if (tail > 0) {
       // Each sample's share of E_p[(f/p)^2] = E_q[f^2 / (p q)] for the default octree guide.
-      const auto p = build_boundary_guide(*scene, ib, options("octree", kDirectionMix, 7));
+      const auto p = build_boundary_guide(*scene, ib, options("octree", kDirectionMix, 7, true));
       std::vector<double> share(M, 0.0);
       double m2 = 0.0;
       for (size_t i = 0; i < M; ++i) {

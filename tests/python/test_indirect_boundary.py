@@ -275,7 +275,7 @@ def test_grid_octaves_option():
     assert "projective grid pyramid of 5 levels, 16x4x8 to 256x64x128 cells" in guide_line()
     assert "projective grid pyramid of 3 levels, 16x4x8 to 64x16x32 cells" in guide_line(grid_octaves=1, grid_resolution=32)
     single = guide_line(grid_octaves=0)
-    assert "pyramid" not in single and "projective grid 64x16x32" in single
+    assert "grid pyramid" not in single and "projective grid 64x16x32" in single
     assert "pyramid" not in guide_line(projective=False)
     # Levels over 4M cells (here 512 x 128 x 256 and 1024 x 256 x 512) are left out, and said so;
     # a grid over 16M cells is refused.
@@ -289,7 +289,8 @@ def test_grid_octaves_option():
 
 def test_direction_mix_option():
     """Both projective guides are sampled in a mixture with the projections' direction histogram
-    (direction_mix, 20 % by default, direction_resolution^2 cells, said in the summary); 0 leaves
+    (direction_mix, 20 % by default, direction_resolution^2 cells and direction_octaves coarser
+    histograms, said in the summary); 0 leaves
     it out; the path-space baseline grid does not use it; the octree's training round samples it
     too; bad values are refused."""
     scene, name, t = moving_box()
@@ -297,9 +298,11 @@ def test_direction_mix_option():
     guide_line = partial(indirect_summary, scene, {name: t})
 
     for guiding in ("grid", "octree"):
-        assert "mixed 20 % with the projective grid over the directions only, 256x256" in guide_line(guiding=guiding)
-        assert "mixed 40 % with the projective grid over the directions only, 64x64" in guide_line(
-            guiding=guiding, direction_mix=0.4, direction_resolution=64)
+        assert ("mixed 20 % with the projective grid over the directions only, pyramid of 3 levels, 64x64 to 256x256 cells"
+                in guide_line(guiding=guiding))
+        assert ("mixed 40 % with the projective grid over the directions only, pyramid of 2 levels, 32x32 to 64x64 cells"
+                in guide_line(guiding=guiding, direction_mix=0.4, direction_resolution=64, direction_octaves=1))
+        assert "mixed 20 % with the projective grid over the directions only, 256x256 (" in guide_line(guiding=guiding, direction_octaves=0)
         assert "directions only" not in guide_line(guiding=guiding, direction_mix=0.0)
     assert "directions only" not in guide_line(guiding="grid", projective=False)
     # The octree's training round draws from the projective grid with its direction histogram.
@@ -310,6 +313,9 @@ def test_direction_mix_option():
             scene.render_forward({name: t}, spp=1, guiding="grid", direction_mix=bad)
     with pytest.raises(ValueError, match="direction_resolution"):
         scene.render_forward({name: t}, spp=1, guiding="grid", direction_resolution=0)
+    for bad in (-1, 9):
+        with pytest.raises(ValueError, match="direction_octaves"):
+            scene.render_forward({name: t}, spp=1, guiding="grid", direction_octaves=bad)
 
 
 def near_specular_sphere(size=24):

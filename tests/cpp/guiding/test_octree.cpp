@@ -169,12 +169,12 @@ TEST_CASE("projective grid pyramid: a normalised equal mixture of the levels, fi
   const auto pts = projected_points(5000, rng);
   std::vector<float> values;
   for (const Vec3& p : pts) values.push_back(sparse(p));
-  const GridPyramid pyramid({16, 4, 8}, 2, pts, values);
+  const GridPyramid pyramid({16, 4, 8}, 2, 2, pts, values);
   REQUIRE(pyramid.levels() == 5);
   check_density(pyramid, rng);
   CHECK(pyramid.box_probability({Vec3(0.0f), Vec3(1.0f)}) == doctest::Approx(1.0).epsilon(1e-5));
   // The density is the mean of the levels' (4x1x2 up to 64x16x32 cells).
-  const GridPyramid one({16, 4, 8}, 0, pts, values);
+  const GridPyramid one({16, 4, 8}, 0, 0, pts, values);
   const BoundaryGrid grid({16, 4, 8}, pts, values), finest({64, 16, 32}, pts, values), coarsest({4, 1, 2}, pts, values);
   const Vec3 on_slab(0.31f, 0.2f, 0.5f);
   CHECK(one.pdf(on_slab) == doctest::Approx(grid.pdf(on_slab)).epsilon(1e-6));
@@ -185,10 +185,17 @@ TEST_CASE("projective grid pyramid: a normalised equal mixture of the levels, fi
   CHECK(pyramid.pdf(on_slab) == doctest::Approx(mean).epsilon(1e-5));
   CHECK(pyramid.describe().find("pyramid of 5 levels, 4x1x2 to 64x16x32 cells") != std::string::npos);
   // Levels over GridPyramid::kMaxLevelCells are left out, and said so.
-  const GridPyramid capped({256, 64, 128}, 1, pts, values);
+  const GridPyramid capped({256, 64, 128}, 1, 1, pts, values);
   CHECK(capped.levels() == 2);
   CHECK(capped.describe().find("1 finer level(s) left out") != std::string::npos);
-  CHECK_THROWS_AS(GridPyramid({16, 4, 8}, -1, pts, values), std::invalid_argument);
+  // Coarser levels only (the direction histogram's): 4x1x2, 8x2x4 and 16x4x8.
+  const GridPyramid down({16, 4, 8}, 2, 0, pts, values);
+  REQUIRE(down.levels() == 3);
+  check_density(down, rng);
+  CHECK(down.pdf(on_slab) == doctest::Approx((coarsest.pdf(on_slab) + BoundaryGrid({8, 2, 4}, pts, values).pdf(on_slab) + grid.pdf(on_slab)) / 3.0).epsilon(1e-5));
+  CHECK(down.region_count() == grid.cell_count());
+  CHECK_THROWS_AS(GridPyramid({16, 4, 8}, -1, 0, pts, values), std::invalid_argument);
+  CHECK_THROWS_AS(GridPyramid({16, 4, 8}, 0, 9, pts, values), std::invalid_argument);
 }
 
 TEST_CASE("octree mixed with the projective grid: a normalised mixture that covers what the points missed") {
