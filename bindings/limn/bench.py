@@ -23,6 +23,8 @@ METHODS = {
     "grid": {"guiding": "grid", "projective": False},              # path-space baseline, 4 points per cell
     "grid10x": {"guiding": "grid", "projective": False, "guiding_spp": 40},
     "projective_grid": {"guiding": "grid", "projective": True},
+    # The paper's projective grid: one grid, no direction histogram (section 5.1.1).
+    "paper_projective_grid": {"guiding": "grid", "projective": True, "grid_octaves": 0, "direction_mix": 0.0},
     "octree_untrained": {"guiding": "octree", "octree_training": 0},   # the paper's octree: projections only
     "octree": {"guiding": "octree"},                                  # with the training round
 }
@@ -96,7 +98,8 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
              f"budget = samples per pixel for every term computed. {runs} run(s) per row on a shared 2-core machine "
              f"(seeds differ; for each budget and run every method in turn, so that they share the machine's drift); time includes building the guide.", "",
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
-             "random points per cell; `projective_grid` and `octree` filled from projected seeds (`octree_untrained`: "
+             "random points per cell; `projective_grid` and `octree` filled from projected seeds (`paper_projective_grid`: "
+             "one grid and no direction histogram, as in the paper; `octree_untrained`: "
              "from the projections alone, as in the paper; `octree`: with the training round's points too).", "",
              "Run-to-run noise: the pixel RMS of the standard deviation over the runs, relative to the reference's RMS "
              "(the error against a reference without error of its own; the RMSE also holds the reference's error).", "",

@@ -20,7 +20,10 @@ STEPS = [("projective grid over the baseline grid 1x", "grid", "projective_grid"
          ("projective grid over the baseline grid 10x", "grid10x", "projective_grid"),
          ("octree, projections only, over the projective grid", "projective_grid", "octree_untrained"),
          ("octree with the training round over the projective grid", "projective_grid", "octree"),
-         ("octree with the training round over the baseline grid 1x", "grid", "octree")]
+         ("octree with the training round over the baseline grid 1x", "grid", "octree"),
+         # The paper's grid (one grid, no direction histogram): its two steps, as the paper took them.
+         ("the paper's projective grid over the baseline grid 1x", "grid", "paper_projective_grid"),
+         ("octree with the training round over the paper's projective grid", "paper_projective_grid", "octree")]
 
 
 def read_rows(path: str, column: int, kept: int = 1) -> dict[tuple[str, int], tuple[float, float]]:
@@ -67,6 +70,8 @@ def print_steps(tables: dict, budget: int) -> None:
             a, b = rows.get((slow, budget)), rows.get((fast, budget))
             ratios.append(equal_time_ratio(a, b) if a and b else float("nan"))
         valid = [r for r in ratios if r == r]
+        if not valid:
+            continue  # neither method in these tables
         gm = math.exp(sum(math.log(r) for r in valid) / len(valid)) if valid else float("nan")
         print(f"| {label} | " + " | ".join(f"{r:.1f}x" if r == r else "n/a" for r in ratios) + (f" | {gm:.1f}x |" if gm == gm else " | n/a |"))
 
