@@ -116,16 +116,11 @@ class Scene:
     def differentiable(self) -> list[str]:
         return list(self._differentiable)
 
-    # Derivative options and their defaults (render_forward / render_backward keyword arguments).
-    DIFF_OPTIONS = {"guiding": "none", "projective": True, "project_seed": "both", "grid_resolution": 64, "grid_octaves": 2,
-                    "guiding_spp": 4, "guiding_seeds": None,
-                    "octree_slices": 100, "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1 << 20,
-                    "octree_grid_mix": 0.5, "octree_training": 512, "direction_mix": 0.2, "direction_resolution": 256,
-                    "direction_octaves": 2,
-                    "guide_refresh": 0, "guide_refresh_threshold": 0.02,
-                    "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
-                    "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True,
-                    "theta_subrange": 0.0, "max_depth": None, "threads": 0}
+    # Derivative options and their defaults (render_forward / render_backward keyword arguments),
+    # from the C++ DiffOptions (the sample counts and the seed are arguments of their own).
+    DIFF_OPTIONS = {k: (float(f"{v:.6g}") if isinstance(v, float) else v)
+                    for k, v in _core.diff_option_defaults().items()
+                    if k not in ("spp_interior", "spp_primary", "spp_boundary", "seed")}
 
     def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
         if not self._differentiable:

@@ -5,7 +5,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <exception>
+#include <functional>
 #include "core/diff/render_diff.h"
 #include "core/geometry/accel.h"
 #include "core/io/image_io.h"
@@ -77,45 +79,82 @@ py::dict diff_stats_dict(const DiffStats& st) {
   return d;
 }
 
-// DiffOptions from the keyword options of Scene.render_forward / render_backward (bindings/limn/
-// scene.py validates and fills them; an unknown key here is a binding bug, reported as such).
+// The derivative options Python sees (Scene.render_forward / render_backward keywords), each with
+// how it is read into DiffOptions and how its default is reported: bindings/limn/scene.py takes
+// its defaults from here (diff_option_defaults), so they live in the C++ structs only.
+struct DiffOptionField {
+  const char* name;
+  std::function<void(DiffOptions&, const py::handle&)> set;
+  std::function<py::object(const DiffOptions&)> get;
+};
+
+// A field read and reported as its own type; `member` returns a reference into DiffOptions.
+template <typename T, typename Member>
+DiffOptionField field(const char* name, Member member) {
+  return {name, [member](DiffOptions& o, const py::handle& v) { member(o) = v.cast<T>(); },
+          [member](const DiffOptions& o) { return py::cast(T(member(const_cast<DiffOptions&>(o)))); }};
+}
+
+const std::vector<DiffOptionField>& diff_option_fields() {
+  static const std::vector<DiffOptionField> fields = {
+      field<int>("spp_interior", [](DiffOptions& o) -> int& { return o.spp_interior; }),
+      field<int>("spp_primary", [](DiffOptions& o) -> int& { return o.spp_primary; }),
+      field<int>("spp_boundary", [](DiffOptions& o) -> int& { return o.spp_boundary; }),
+      field<uint64_t>("seed", [](DiffOptions& o) -> uint64_t& { return o.seed; }),
+      field<int>("threads", [](DiffOptions& o) -> int& { return o.threads; }),
+      field<std::string>("guiding", [](DiffOptions& o) -> std::string& { return o.guiding; }),
+      field<bool>("projective", [](DiffOptions& o) -> bool& { return o.projective; }),
+      field<std::string>("project_seed", [](DiffOptions& o) -> std::string& { return o.project_seed; }),
+      field<int>("grid_resolution", [](DiffOptions& o) -> int& { return o.grid_resolution; }),
+      field<int>("grid_octaves", [](DiffOptions& o) -> int& { return o.grid_octaves; }),
+      field<int>("guiding_spp", [](DiffOptions& o) -> int& { return o.guiding_spp; }),
+      // 0: the guide's default (seeds_per_pixel); Python says None.
+      {"guiding_seeds", [](DiffOptions& o, const py::handle& v) { o.guiding_seeds = v.is_none() ? 0 : v.cast<int>(); },
+       [](const DiffOptions& o) { return o.guiding_seeds == 0 ? py::object(py::none()) : py::object(py::cast(o.guiding_seeds)); }},
+      field<int>("octree_slices", [](DiffOptions& o) -> int& { return o.octree.slices; }),
+      field<int>("octree_max_depth", [](DiffOptions& o) -> int& { return o.octree.max_depth; }),
+      field<int>("octree_leaf_samples", [](DiffOptions& o) -> int& { return o.octree.leaf_samples; }),
+      field<size_t>("octree_max_leaves", [](DiffOptions& o) -> size_t& { return o.octree.max_leaves; }),
+      field<float>("octree_grid_mix", [](DiffOptions& o) -> float& { return o.octree_grid_mix; }),
+      field<int>("octree_training", [](DiffOptions& o) -> int& { return o.octree_training; }),
+      field<float>("direction_mix", [](DiffOptions& o) -> float& { return o.direction_mix; }),
+      field<int>("direction_resolution", [](DiffOptions& o) -> int& { return o.direction_resolution; }),
+      field<int>("direction_octaves", [](DiffOptions& o) -> int& { return o.direction_octaves; }),
+      field<int>("guide_refresh", [](DiffOptions& o) -> int& { return o.guide_refresh; }),
+      field<float>("guide_refresh_threshold", [](DiffOptions& o) -> float& { return o.guide_refresh_threshold; }),
+      field<bool>("heightfield_mipmap", [](DiffOptions& o) -> bool& { return o.heightfield.search.use_mipmap; }),
+      field<bool>("heightfield_curvature_test", [](DiffOptions& o) -> bool& { return o.heightfield.search.curvature_test; }),
+      field<bool>("heightfield_reparam", [](DiffOptions& o) -> bool& { return o.heightfield.reparameterize; }),
+      field<float>("heightfield_interval_mix", [](DiffOptions& o) -> float& { return o.heightfield.interval_uniform_share; }),
+      field<bool>("heightfield_camera_every_interval", [](DiffOptions& o) -> bool& { return o.heightfield.camera_every_interval; }),
+      field<float>("theta_subrange", [](DiffOptions& o) -> float& { return o.heightfield.theta_subrange_degrees; }),
+      // The scene's own max_depth unless set; Python says None.
+      {"max_depth", [](DiffOptions& o, const py::handle& v) { o.max_depth = v.is_none() ? kSceneMaxDepth : v.cast<int>(); },
+       [](const DiffOptions& o) { return o.max_depth == kSceneMaxDepth ? py::object(py::none()) : py::object(py::cast(o.max_depth)); }},
+  };
+  return fields;
+}
+
+// DiffOptions from the keyword options (scene.py validates and fills them; an unknown key here is
+// a binding bug, reported as such).
 DiffOptions diff_options(const py::dict& options) {
   DiffOptions o;
+  const auto& fields = diff_option_fields();
   for (const auto& [key, value] : options) {
     const std::string k = py::str(key);
-    if (k == "spp_interior") o.spp_interior = value.cast<int>();
-    else if (k == "spp_primary") o.spp_primary = value.cast<int>();
-    else if (k == "spp_boundary") o.spp_boundary = value.cast<int>();
-    else if (k == "seed") o.seed = value.cast<uint64_t>();
-    else if (k == "threads") o.threads = value.cast<int>();
-    else if (k == "guiding") o.guiding = value.cast<std::string>();
-    else if (k == "grid_resolution") o.grid_resolution = value.cast<int>();
-    else if (k == "grid_octaves") o.grid_octaves = value.cast<int>();
-    else if (k == "guiding_spp") o.guiding_spp = value.cast<int>();
-    else if (k == "guiding_seeds") o.guiding_seeds = value.cast<int>();
-    else if (k == "max_depth") o.max_depth = value.is_none() ? kSceneMaxDepth : value.cast<int>();
-    else if (k == "projective") o.projective = value.cast<bool>();
-    else if (k == "project_seed") o.project_seed = value.cast<std::string>();
-    else if (k == "octree_slices") o.octree.slices = value.cast<int>();
-    else if (k == "octree_max_depth") o.octree.max_depth = value.cast<int>();
-    else if (k == "octree_leaf_samples") o.octree.leaf_samples = value.cast<int>();
-    else if (k == "octree_max_leaves") o.octree.max_leaves = value.cast<size_t>();
-    else if (k == "octree_grid_mix") o.octree_grid_mix = value.cast<float>();
-    else if (k == "octree_training") o.octree_training = value.cast<int>();
-    else if (k == "direction_mix") o.direction_mix = value.cast<float>();
-    else if (k == "direction_resolution") o.direction_resolution = value.cast<int>();
-    else if (k == "direction_octaves") o.direction_octaves = value.cast<int>();
-    else if (k == "guide_refresh") o.guide_refresh = value.cast<int>();
-    else if (k == "guide_refresh_threshold") o.guide_refresh_threshold = value.cast<float>();
-    else if (k == "heightfield_mipmap") o.heightfield.search.use_mipmap = value.cast<bool>();
-    else if (k == "heightfield_curvature_test") o.heightfield.search.curvature_test = value.cast<bool>();
-    else if (k == "heightfield_reparam") o.heightfield.reparameterize = value.cast<bool>();
-    else if (k == "heightfield_interval_mix") o.heightfield.interval_uniform_share = value.cast<float>();
-    else if (k == "heightfield_camera_every_interval") o.heightfield.camera_every_interval = value.cast<bool>();
-    else if (k == "theta_subrange") o.heightfield.theta_subrange_degrees = value.cast<float>();
-    else throw std::invalid_argument("unknown derivative option '" + k + "'");
+    const auto f = std::find_if(fields.begin(), fields.end(), [&](const DiffOptionField& d) { return k == d.name; });
+    if (f == fields.end()) throw std::invalid_argument("unknown derivative option '" + k + "'");
+    f->set(o, value);
   }
   return o;
+}
+
+// Every option's default, from a default-constructed DiffOptions.
+py::dict diff_option_defaults() {
+  const DiffOptions o;
+  py::dict d;
+  for (const auto& f : diff_option_fields()) d[f.name] = f.get(o);
+  return d;
 }
 
 // Runs f with the GIL released; a cancellation caused by the callback re-raises its error.
@@ -295,6 +334,7 @@ PYBIND11_MODULE(_core, m) {
         write_ply(path, std::vector<float>(v.data(), v.data() + v.size()), std::vector<uint32_t>(f.data(), f.data() + f.size()));
       }, py::arg("path"), py::arg("positions"), py::arg("faces"));
   m.def("embree_error_count", &EmbreeDevice::error_count);
+  m.def("diff_option_defaults", &diff_option_defaults, "Derivative options and their defaults (DiffOptions)");
 
   using Rows = py::array_t<double, py::array::c_style | py::array::forcecast>;
   auto check_rows = [](const LargeSteps& ls, const Rows& a, const char* what) {

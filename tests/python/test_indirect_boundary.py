@@ -287,6 +287,19 @@ def test_grid_octaves_option():
             scene.render_forward({name: t}, spp=1, guiding="grid", grid_octaves=bad)
 
 
+def test_option_defaults_are_the_core_ones():
+    """Scene.DIFF_OPTIONS comes from the C++ DiffOptions (one place for every default), and an
+    option given in Python reaches the guide: the octree's uniform samples per leaf, said in the
+    summary, at the default and when set."""
+    from limn import _core
+    core = _core.diff_option_defaults()
+    assert set(limn.Scene.DIFF_OPTIONS) == set(core) - {"spp_interior", "spp_primary", "spp_boundary", "seed"}
+    scene, name, t = moving_box()
+    guide_line = partial(indirect_summary, scene, {name: t}, guiding="octree", octree_training=0)
+    assert f"{core['octree_leaf_samples']} uniform samples per leaf" in guide_line()
+    assert "3 uniform samples per leaf" in guide_line(octree_leaf_samples=3)
+
+
 def test_direction_mix_option():
     """Both projective guides are sampled in a mixture with the projections' direction histogram
     (direction_mix, 20 % by default, direction_resolution^2 cells and direction_octaves coarser
