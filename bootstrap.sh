@@ -47,9 +47,9 @@ fi
 say "building the limn Python package"
 quiet "$PY" -m pip install -q --no-build-isolation --no-deps .
 quiet cmake -S . -B build/cpp -G Ninja -DCMAKE_BUILD_TYPE=Release -DLIMN_TESTS=ON -DLIMN_PYTHON=OFF
-say "building the C++ tests"
-quiet ninja -C build/cpp limn_tests
+say "building the C++ tests and the guide-variance tool"
+quiet ninja -C build/cpp limn_tests limn_guide_variance
 
 # --- 4. Blender add-on bundle with the compiled module inside (build/addon, build/limn_blender.zip) -
 quiet "$PY" blender_addon/package.py --out build
-say "ready: .venv (limn $("$PY" -c 'import limn; print(limn.__version__)')), build/cpp/limn_tests, build/addon/limn_blender"
+say "ready: .venv (limn $("$PY" -c 'import limn; print(limn.__version__)')), build/cpp/limn_tests, build/cpp/limn_guide_variance, build/addon/limn_blender"

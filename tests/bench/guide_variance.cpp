@@ -29,7 +29,7 @@ using namespace limn;
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D] [--direction-octaves K] [--leaf-samples N]\n", argv[0]);
     return 2;
   }
   int seeds = 4, qspp = 2048, spp = 1024, tail = 0;
@@ -43,6 +43,7 @@ int main(int argc, char** argv) {
     else if (k == "--grid-mix") tested.octree_grid_mix = std::stof(argv[a + 1]);
     else if (k == "--direction-resolution") tested.direction_resolution = std::stoi(argv[a + 1]);
     else if (k == "--direction-octaves") tested.direction_octaves = std::stoi(argv[a + 1]);
+    else if (k == "--leaf-samples") tested.octree.leaf_samples = std::stoi(argv[a + 1]);
     else {
       std::fprintf(stderr, "unknown option %s\n", argv[a]);
       return 2;
@@ -60,6 +61,7 @@ int main(int argc, char** argv) {
         o.octree_grid_mix = tested.octree_grid_mix;
         o.direction_resolution = tested.direction_resolution;
         o.direction_octaves = tested.direction_octaves;
+        o.octree.leaf_samples = tested.octree.leaf_samples;
       }
       o.guiding = guiding;
       o.direction_mix = direction_mix;
