@@ -39,21 +39,22 @@ def shadow_scene(light):
     return validation("occluder_" + light)
 
 
-def compare(scene, name, t, spp_boundary, seeds=8, fd_spp=1024):
+def compare(scene, name, t, spp_boundary, seeds=8, fd_spp=1024, eps=2e-2):
     """Block z-scores (test_derivatives.block_z) of the derivative with and without the indirect
     term against FD. The per-block spread is estimated from `seeds` runs (t-distributed with
     seeds - 1 degrees of freedom: 8 seeds keep a |z| > 5 false alarm near 0.1 % per block)."""
-    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-2, spp=fd_spp, seed=k, cache=False) for k in range(seeds)])
+    fd = np.stack([limn.fd(scene, {name: t}, eps=eps, spp=fd_spp, seed=k, cache=False) for k in range(seeds)])
     on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=spp_boundary, seed=50 + k) for k in range(seeds)])
     off = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=0, seed=50 + k) for k in range(seeds)])
     return block_z(on, fd), block_z(off, fd)
 
 
-def check_term(scene, name, t, spp_boundary, off_at_least):
+def check_term(scene, name, t, spp_boundary, off_at_least, **fd):
     """The derivative along t agrees with FD with the indirect term (block |z| < 5) and does not
-    without it (some block beyond `off_at_least`)."""
+    without it (some block beyond `off_at_least`). `fd`: compare's eps and fd_spp."""
     scene.set_differentiable([name])
-    z_on, z_off = compare(scene, name, t, spp_boundary)
+    z_on, z_off = compare(scene, name, t, spp_boundary, **fd)
+    print(f"{name}: max |z| {np.abs(z_on).max():.2f} with the indirect term, {np.abs(z_off).max():.2f} without")
     assert np.abs(z_on).max() < 5.0, z_on
     assert np.abs(z_off).max() > off_at_least, z_off
 
@@ -91,9 +92,13 @@ def test_moving_occluder_shadow(light, spp_boundary):
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_moving_receiver_under_a_static_occluder(light, spp_boundary):
     """The floor rises under a static box: the boundary (the box's edges) does not move, the
-    segments from the floor past it do (their end on the floor slides along the camera ray)."""
+    segments from the floor past it do (their end on the floor slides along the camera ray).
+    The image is curved in the floor's height: central differences with eps 0.02 are biased. With
+    this test's 8192 FD samples they fail it (block |z| 8.8 point light, 6.0 area light; at 1024
+    samples the FD noise hid that: 3.6, 2.5); eps 0.005 passes (2.3, 2.4), and the term switched
+    off is further out (z 20 and 79, against 11 and 58 before)."""
     scene = load(shadow_scene(light))
-    check_term(scene, "floor.to_world.translation", np.float32([0, 0, 1]), spp_boundary, 10)
+    check_term(scene, "floor.to_world.translation", np.float32([0, 0, 1]), spp_boundary, 10, eps=5e-3, fd_spp=8192)
 
 
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
