@@ -30,6 +30,16 @@ METHODS = {
 }
 
 
+def method_options(method: str) -> dict:
+    """A method's options; ``name:independent`` is the method with independent boundary points
+    instead of the default stratified ones (``boundary_sampler``)."""
+    name, _, sampler = method.partition(":")
+    if name not in METHODS or sampler not in ("", "independent", "stratified"):
+        raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)}, each optionally with "
+                         f"':independent' or ':stratified')")
+    return dict(METHODS[name], **({"boundary_sampler": sampler} if sampler else {}))
+
+
 def default_tangent(value: np.ndarray, kind: str) -> np.ndarray:
     if kind == "x" and value.ndim == 2 and value.shape[1] == 3:
         t = np.zeros_like(value)
@@ -50,9 +60,7 @@ def guide_seconds(summary: list[str]) -> float:
 
 def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_spp: int, eps: float, out: str,
         tangent: str = "x", seed: int = 0, argv: list[str] | None = None, runs: int = 1) -> str:
-    for m in methods:
-        if m not in METHODS:
-            raise ValueError(f"unknown method '{m}' (known: {', '.join(METHODS)})")
+    options = {m: method_options(m) for m in methods}
     scene = load(scene_path)
     if param not in scene.params:
         raise ValueError(f"{scene_path}: unknown parameter '{param}'")
@@ -72,7 +80,7 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
             for m in methods:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    img = scene.render_forward(t, spp=b, seed=seed + 1000 * r, **METHODS[m])
+                    img = scene.render_forward(t, spp=b, seed=seed + 1000 * r, **options[m])
                 st = scene.last_stats
                 samples[(m, b)].append((img.astype(np.float64), st["seconds"], guide_seconds(st["summary"])))
                 summary[m] = st["summary"]
@@ -100,7 +108,9 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
              "random points per cell; `projective_grid` and `octree` filled from projected seeds (`paper_projective_grid`: "
              "one grid and no direction histogram, as in the paper; `octree_untrained`: "
-             "from the projections alone, as in the paper; `octree`: with the training round's points too).", "",
+             "from the projections alone, as in the paper; `octree`: with the training round's points too). "
+             "The indirect term's boundary points are stratified (`boundary_sampler`, the default) unless the method "
+             "says `:independent`.", "",
              "Run-to-run noise: the pixel RMS of the standard deviation over the runs, relative to the reference's RMS "
              "(the error against a reference without error of its own; the RMSE also holds the reference's error).", "",
              "| method | budget (spp) | time (s) | guide set-up (s) | relative RMSE | worst run | relative MAE | run-to-run noise |",

@@ -131,6 +131,8 @@ class Scene:
         opts = dict(self.DIFF_OPTIONS, **options)
         if opts["guiding"] not in ("none", "grid", "octree"):
             raise ValueError(f"guiding must be 'none', 'grid' or 'octree' (got '{opts['guiding']}')")
+        if opts["boundary_sampler"] not in ("independent", "stratified"):
+            raise ValueError(f"boundary_sampler must be 'independent' or 'stratified' (got '{opts['boundary_sampler']}')")
         if opts["project_seed"] not in ("bsdf", "emitter", "both"):
             raise ValueError(f"project_seed must be 'bsdf', 'emitter' or 'both' (got '{opts['project_seed']}')")
         if seed < 0:
@@ -212,6 +214,11 @@ class Scene:
           which the grid and the octree hold at the defensive density only; the coarser histograms
           cover the GGX lobe's long tails next to the cells the projections filled (0: off;
           docs/reports/projective/README.md).
+        - ``boundary_sampler``: the indirect term's points of the boundary sample space,
+          ``"stratified"`` (default: the first coordinate, with which the guides pick their cell or
+          leaf, in one stratum per sample, the other two from Owen-scrambled Sobol points, so every
+          region gets its expected share of the samples give or take one; core/math/sequence.h) or
+          ``"independent"`` (independent uniform numbers). Both are unbiased.
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
         - ``grid_octaves`` (projective grid and the octree's grid, default 2): the projections fill

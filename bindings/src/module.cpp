@@ -100,6 +100,7 @@ const std::vector<DiffOptionField>& diff_option_fields() {
       field<int>("spp_interior", [](DiffOptions& o) -> int& { return o.spp_interior; }),
       field<int>("spp_primary", [](DiffOptions& o) -> int& { return o.spp_primary; }),
       field<int>("spp_boundary", [](DiffOptions& o) -> int& { return o.spp_boundary; }),
+      field<std::string>("boundary_sampler", [](DiffOptions& o) -> std::string& { return o.boundary_sampler; }),
       field<uint64_t>("seed", [](DiffOptions& o) -> uint64_t& { return o.seed; }),
       field<int>("threads", [](DiffOptions& o) -> int& { return o.threads; }),
       field<std::string>("guiding", [](DiffOptions& o) -> std::string& { return o.guiding; }),

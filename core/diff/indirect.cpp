@@ -49,12 +49,6 @@ IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params,
     if (scene.emitters[i].is_delta()) m_delta_lights.push_back(int(i));
 }
 
-void IndirectBoundary::sample(Pcg32& rng, PathInputs& in, std::vector<Splat>& splats, std::vector<Var>& velocities,
-                              uint64_t& rays) const {
-  const Vec3 u(rng.next_float(), rng.next_float(), rng.next_float());
-  sample_at(u, 1.0f, 1.0f, rng, in, splats, velocities, rays);
-}
-
 float IndirectBoundary::guide_value(const Vec3& u) const {
   // |L_d W sin(phi)| of the uniform-direction term, without the velocity (it depends on the
   // tangent or adjoint, unknown when the guide is built). Only the value is wanted: the nodes it

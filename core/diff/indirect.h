@@ -32,18 +32,16 @@ class IndirectBoundary {
   bool empty() const { return m_space.empty(); }
   const BoundarySpace& space() const { return m_space; }
 
-  // One boundary sample. Every camera connection adds (pixel, value) to `splats`; the sample's
-  // contribution to that pixel is value * normal_velocity, normal_velocity = d x_b/d theta . n_b
-  // recorded on the tape (one per direction evaluated, so splats carry its index into `velocities`).
+  // One boundary sample at the point u of the boundary sample space [0,1)^3, chosen with density
+  // pdf_u (pdf_u0: density of u.x alone, used by the delta-light terms that ignore u.y, u.z). Every
+  // camera connection adds (pixel, value) to `splats`; the sample's contribution to that pixel is
+  // value * normal_velocity, normal_velocity = d x_b/d theta . n_b recorded on the tape (one per
+  // direction evaluated, so splats carry its index into `velocities`).
   struct Splat {
     int pixel;
     Spectrum value;
     int velocity;
   };
-  void sample(Pcg32& rng, PathInputs& inputs, std::vector<Splat>& splats, std::vector<ad::Var>& velocities,
-              uint64_t& rays) const;
-  // The same at a given point u of the boundary sample space [0,1)^3, chosen with density pdf_u
-  // (pdf_u0: density of u.x alone, used by the delta-light terms that ignore u.y, u.z).
   void sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& inputs, std::vector<Splat>& splats,
                  std::vector<ad::Var>& velocities, uint64_t& rays, bool delta_terms = true) const;
   // Magnitude of the uniform-direction term at u: the integrand the guides are built from, with

@@ -13,6 +13,7 @@
 #include "core/diff/seeding.h"
 #include "core/guiding/grid.h"
 #include "core/guiding/mixture.h"
+#include "core/math/sequence.h"
 
 namespace limn {
 namespace {
@@ -68,6 +69,8 @@ void for_each_pixel(const Scene& scene, const DiffOptions& opt, PerPixel&& per_p
 
 void validate(const Scene& scene, const DiffParams& params, const DiffOptions& opt) {
   if (params.empty()) throw std::invalid_argument(scene.source + ": no differentiable parameters (call set_differentiable first)");
+  if (opt.boundary_sampler != "independent" && opt.boundary_sampler != "stratified")
+    throw std::invalid_argument(scene.source + ": boundary_sampler must be 'independent' or 'stratified' (got '" + opt.boundary_sampler + "')");
   if (opt.guiding != "none" && opt.guiding != "grid" && opt.guiding != "octree")
     throw std::invalid_argument(scene.source + ": guiding must be 'none', 'grid' or 'octree' (got '" + opt.guiding + "')");
   parse_seed_segments(opt.project_seed, scene.source);
@@ -137,7 +140,7 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
   return s;
 }
 
-// Boundary samples j = 0 .. n-1 in parallel blocks; fn(rng, inputs) per sample with the tape
+// Boundary samples j = 0 .. n-1 in parallel blocks; fn(j, rng, inputs) per sample with the tape
 // cleared. Streams are seeded from (seed, tag, j), disjoint from the interior term's pixel streams.
 template <typename Fn>
 void for_each_boundary_sample(uint64_t n, uint64_t tag, const DiffOptions& opt, Fn&& fn) {
@@ -151,7 +154,7 @@ void for_each_boundary_sample(uint64_t n, uint64_t tag, const DiffOptions& opt, 
           Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ tag), j);
           ad::Tape::current().clear();
           in.clear();
-          fn(rng, in);
+          fn(j, rng, in);
         }
     });
   });
@@ -437,7 +440,7 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
     terms.primary = std::make_unique<PrimaryBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
     const uint64_t n = samples_for(scene, opt.spp_primary);
     if (!terms.primary->empty())
-      for_each_boundary_sample(n, kPrimaryTag, opt, [&](Pcg32& rng, PathInputs& in) {
+      for_each_boundary_sample(n, kPrimaryTag, opt, [&](uint64_t, Pcg32& rng, PathInputs& in) {
         int pixel;
         Spectrum dL;
         ad::Var vn;
@@ -452,17 +455,20 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
     terms.indirect = std::make_unique<IndirectBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
     const uint64_t n = samples_for(scene, opt.spp_boundary);
     if (!terms.indirect->empty() && opt.guiding != "none") guide_for_call(scene, params, *terms.indirect, opt, terms);
+    const StratifiedSequence3 stratified(n, mix_bits(opt.seed ^ kIndirectTag));
+    const bool stratify = opt.boundary_sampler == "stratified";
     if (!terms.indirect->empty())
-      for_each_boundary_sample(n, kIndirectTag, opt, [&](Pcg32& rng, PathInputs& in) {
+      for_each_boundary_sample(n, kIndirectTag, opt, [&](uint64_t j, Pcg32& rng, PathInputs& in) {
         std::vector<IndirectBoundary::Splat> splats;
         std::vector<ad::Var> vel;
         uint64_t r = 0;
+        const Vec3d u01 = stratify ? stratified.point(j, rng) : Vec3d(rng.next_double(), rng.next_float(), rng.next_float());
         if (terms.guide) {
           float pdf_u;
-          const Vec3 u = terms.guide->sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf_u);
+          const Vec3 u = terms.guide->sample(u01, &pdf_u);
           terms.indirect->sample_at(u, pdf_u, terms.guide->pdf_first(u.x), rng, in, splats, vel, r);
         } else {
-          terms.indirect->sample(rng, in, splats, vel, r);
+          terms.indirect->sample_at(Vec3(std::min(u01.x, 0x1.fffffep-1), u01.y, u01.z), 1.0f, 1.0f, rng, in, splats, vel, r);
         }
         rays += r;
         if (splats.empty()) return;

@@ -72,6 +72,8 @@ struct DiffOptions {
   int spp_interior = 0;   // 0: the scene's sample count
   int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
   int spp_boundary = 0;   // indirect boundary samples, per pixel on average (0: off)
+  // Indirect boundary: the call's points of [0,1)^3 "independent" or "stratified" (core/math/sequence.h).
+  std::string boundary_sampler = "stratified";
   std::string guiding = "none";  // indirect boundary: "none" (uniform), "grid" or "octree" (core/guiding/)
   bool projective = true;        // grid: fill from projected seeds (false: the path-space baseline)
   std::string project_seed = "both";  // seed segments from "bsdf", "emitter" or "both" (core/diff/seeding.h)

@@ -23,7 +23,14 @@ STEPS = [("projective grid over the baseline grid 1x", "grid", "projective_grid"
          ("octree with the training round over the baseline grid 1x", "grid", "octree"),
          # The paper's grid (one grid, no direction histogram): its two steps, as the paper took them.
          ("the paper's projective grid over the baseline grid 1x", "grid", "paper_projective_grid"),
-         ("octree with the training round over the paper's projective grid", "paper_projective_grid", "octree")]
+         ("octree with the training round over the paper's projective grid", "paper_projective_grid", "octree"),
+         # Stratified boundary points (the default) against independent ones (`method:independent`).
+         ("baseline grid: stratified over independent points", "grid:independent", "grid"),
+         ("projective grid: stratified over independent points", "projective_grid:independent", "projective_grid"),
+         ("octree: stratified over independent points", "octree:independent", "octree"),
+         ("projective grid over the baseline grid, both with independent points", "grid:independent", "projective_grid:independent"),
+         ("octree over the projective grid, both with independent points", "projective_grid:independent", "octree:independent"),
+         ("octree over the baseline grid, both with independent points", "grid:independent", "octree:independent")]
 
 
 def read_rows(path: str, column: int, kept: int = 1) -> dict[tuple[str, int], tuple[float, float]]:

@@ -239,6 +239,8 @@ def test_api_errors():
         scene.render_forward({"floor.reflectance": np.ones(3)}, spp_boundary=-1)
     with pytest.raises(ValueError, match="guiding must be 'none', 'grid' or 'octree'"):
         scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="kdtree")
+    with pytest.raises(ValueError, match="boundary_sampler must be 'independent' or 'stratified' \\(got 'sobol'\\)"):
+        scene.render_forward({"floor.reflectance": np.ones(3)}, boundary_sampler="sobol")
     with pytest.raises(ValueError, match="project_seed must be"):
         scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="grid", project_seed="camera")
     with pytest.raises(TypeError, match="unknown derivative option"):

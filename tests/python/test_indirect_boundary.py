@@ -197,14 +197,15 @@ def test_grid_guiding_agrees_and_lowers_the_error():
     assert err(grid) < err(uniform), (err(grid), err(uniform))
 
 
+@pytest.mark.parametrize("sampler", ["stratified", "independent"])
 @pytest.mark.parametrize("guiding", ["grid", "octree"])
-def test_projective_guiding_agrees_with_fd(guiding):
-    """Projective guides (seeds projected onto silhouettes) are unbiased: with many boundary
-    samples they agree with finite differences block by block, and the summary says how they
-    were built."""
+def test_projective_guiding_agrees_with_fd(guiding, sampler):
+    """Projective guides (seeds projected onto silhouettes) are unbiased with either kind of
+    boundary points: with many boundary samples they agree with finite differences block by
+    block, and the summary says how they were built."""
     scene, name, t, fd = area_shadow_with_fd()
     runs = np.stack([quiet(scene.render_forward, {name: t}, spp=16, spp_primary=64, spp_boundary=1024, guiding=guiding,
-                           guiding_seeds=32, seed=90 + k) for k in range(8)])
+                           guiding_seeds=32, boundary_sampler=sampler, seed=90 + k) for k in range(8)])
     line = next(l for l in scene.last_stats["summary"] if l.startswith("indirect boundary"))
     assert ("projective grid" if guiding == "grid" else "octree 100 slices") in line, line
     assert "onto silhouettes" in line
