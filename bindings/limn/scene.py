@@ -215,9 +215,9 @@ class Scene:
           cover the GGX lobe's long tails next to the cells the projections filled (0: off;
           docs/reports/projective/README.md).
         - ``boundary_sampler``: the indirect term's points of the boundary sample space,
-          ``"stratified"`` (default: the first coordinate, with which the guides pick their cell or
-          leaf, in one stratum per sample, the other two from Owen-scrambled Sobol points, so every
-          region gets its expected share of the samples give or take one; core/math/sequence.h) or
+          ``"stratified"`` (default: the first coordinate in one stratum per sample, the other two
+          from Owen-scrambled Sobol points, which the guides map axis by axis, so every region gets
+          close to its expected share of the samples; core/math/sequence.h) or
           ``"independent"`` (independent uniform numbers). Both are unbiased.
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).

@@ -261,6 +261,21 @@ bool finite_adjoints(const std::vector<double>& adj, const PathInputs& in) {
 }
 
 
+// Point j of a call's n points of the boundary sample space [0,1)^3, as boundary_sampler says:
+// stratified (core/math/sequence.h) or independent.
+class BoundaryPoints {
+ public:
+  BoundaryPoints(const DiffOptions& opt, uint64_t n, uint64_t tag)
+      : m_stratify(opt.boundary_sampler == "stratified"), m_sequence(n, mix_bits(opt.seed ^ tag)) {}
+  Vec3d operator()(uint64_t j, Pcg32& rng) const {
+    return m_stratify ? m_sequence.point(j, rng) : Vec3d(rng.next_double(), rng.next_double(), rng.next_double());
+  }
+
+ private:
+  bool m_stratify;
+  StratifiedSequence3 m_sequence;
+};
+
 // The octree's training round (iterative guiding in the manner of Muller et al. 2017's practical
 // path guiding; not in the projective-sampling paper): `octree_training` samples per pixel drawn
 // from the projective grid (with its direction histogram) and the integrand evaluated at each. A
@@ -276,13 +291,15 @@ template <typename Integrand>
 void training_points(const Scene& scene, const DiffOptions& opt, const Integrand& integrand, const BoundaryGuide& first,
                      tbb::task_arena& arena, std::vector<Vec3>& kept, std::vector<float>& kept_values, std::string& origin) {
   const uint64_t n = uint64_t(opt.octree_training) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
+  constexpr uint64_t kTrainingTag = 0x747261696e696e67ULL;
+  const BoundaryPoints point(opt, n, kTrainingTag);
   std::vector<Vec3> drawn(n);
   std::vector<float> value(n, 0.0f), pdf(n, 0.0f);
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<uint64_t>(0, n, 1024), [&](const tbb::blocked_range<uint64_t>& r) {
       for (uint64_t i = r.begin(); i != r.end(); ++i) {
-        Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ 0x747261696e696e67ULL), i);
-        drawn[i] = first.sample(Vec3d(rng.next_double(), rng.next_float(), rng.next_float()), &pdf[i]);
+        Pcg32 rng = pixel_rng(mix_bits(opt.seed ^ kTrainingTag), i);
+        drawn[i] = first.sample(point(i, rng), &pdf[i]);
         value[i] = integrand(drawn[i]);
       }
     });
@@ -455,20 +472,19 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
     terms.indirect = std::make_unique<IndirectBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
     const uint64_t n = samples_for(scene, opt.spp_boundary);
     if (!terms.indirect->empty() && opt.guiding != "none") guide_for_call(scene, params, *terms.indirect, opt, terms);
-    const StratifiedSequence3 stratified(n, mix_bits(opt.seed ^ kIndirectTag));
-    const bool stratify = opt.boundary_sampler == "stratified";
+    const BoundaryPoints point(opt, n, kIndirectTag);
     if (!terms.indirect->empty())
       for_each_boundary_sample(n, kIndirectTag, opt, [&](uint64_t j, Pcg32& rng, PathInputs& in) {
         std::vector<IndirectBoundary::Splat> splats;
         std::vector<ad::Var> vel;
         uint64_t r = 0;
-        const Vec3d u01 = stratify ? stratified.point(j, rng) : Vec3d(rng.next_double(), rng.next_float(), rng.next_float());
+        const Vec3d u01 = point(j, rng);
         if (terms.guide) {
           float pdf_u;
           const Vec3 u = terms.guide->sample(u01, &pdf_u);
           terms.indirect->sample_at(u, pdf_u, terms.guide->pdf_first(u.x), rng, in, splats, vel, r);
         } else {
-          terms.indirect->sample_at(Vec3(std::min(u01.x, 0x1.fffffep-1), u01.y, u01.z), 1.0f, 1.0f, rng, in, splats, vel, r);
+          terms.indirect->sample_at(glm::min(Vec3(u01), Vec3(0x1.fffffep-1f)), 1.0f, 1.0f, rng, in, splats, vel, r);
         }
         rays += r;
         if (splats.empty()) return;

@@ -29,10 +29,10 @@ class BoundaryGuide {
  public:
   virtual ~BoundaryGuide() = default;
   // A point of [0,1)^3 from three uniform numbers, and its density with respect to [0,1)^3.
-  // u.x chooses the cell or leaf (and a mixture's component) and its remainder places the point
-  // inside, so it is a double (Pcg32::next_double): with a float's 24 bits a cell of probability
-  // p could only be reached at p 2^24 points along the first axis (a fixed quadrature instead of
-  // the density the guide reports; the direction histogram's cells span the whole axis).
+  // u.x chooses the leaf, slab or a mixture's component (the grid: u.y and u.z its row and cell)
+  // and its remainder places the point inside, so the numbers are doubles (Pcg32::next_double):
+  // with a float's 24 bits a cell of probability p could only be reached at p 2^24 points along
+  // an axis (a fixed quadrature instead of the density the guide reports).
   virtual Vec3 sample(const Vec3d& u, float* pdf) const = 0;
   virtual float pdf(const Vec3& p) const = 0;
   // Density of the first coordinate alone (for terms that only use it).

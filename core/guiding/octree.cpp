@@ -140,6 +140,19 @@ void BoundaryOctree::finish(const std::vector<double>& mass) {
     m_prob[l] = float(total > 0.0 ? (1.0 - m_opt.defensive) * mass[l] / total + m_opt.defensive * volume : volume);
   }
   m_select = Distribution1D(m_prob);
+  // Subtree probabilities for sample()'s descent (children come after their parent).
+  for (size_t k = m_nodes.size(); k-- > 0;) {
+    Node& node = m_nodes[k];
+    if (node.child < 0) {
+      node.prob = m_select.pmf(size_t(node.leaf));
+    } else {
+      node.prob = 0.0;
+      for (int c = 0; c < 8; ++c) node.prob += m_nodes[size_t(node.child + c)].prob;
+    }
+  }
+  std::vector<float> slab_prob(size_t(m_opt.slices));
+  for (int s = 0; s < m_opt.slices; ++s) slab_prob[size_t(s)] = float(m_nodes[size_t(s)].prob);
+  m_slabs = Distribution1D(slab_prob);
 
   // Marginal density of the first coordinate on the finest slab subdivision (a difference array:
   // every leaf adds prob / width over the bins it spans).
@@ -172,10 +185,37 @@ int BoundaryOctree::leaf_at(const Vec3& p) const {
 }
 
 Vec3 BoundaryOctree::sample(const Vec3d& u, float* pdf) const {
-  size_t l;
-  const double f = m_select.sample_remapped(u.x, &l);
-  const Leaf& leaf = m_leaves[l];
-  const Vec3 p = glm::min(Vec3(Vec3d(leaf.lo) + Vec3d(leaf.size) * Vec3d(f, u.y, u.z)), Vec3(1.0f - 1e-7f));
+  // A descent, marginal then conditionals at every level (the Knothe-Rosenblatt map of the
+  // piecewise-constant density, as BoundaryGrid::sample): u.x picks the slab, then at each node
+  // u.x the half along axis 0, u.y the half along axis 1 given it and u.z the half along axis 2,
+  // each number rescaled to what is left of it. Every axis stays monotone in its own number, so
+  // stratified points (core/math/sequence.h) stay stratified along each axis inside the tree.
+  const double below_one = std::nextafter(1.0, 0.0);
+  // Chooses the upper half when v falls beyond the lower half's share and rescales v.
+  auto choose = [below_one](double& v, double lower, double both) {
+    const double share = both > 0.0 ? lower / both : 0.5;
+    const bool upper = !(v < share);
+    v = upper ? (share < 1.0 ? (v - share) / (1.0 - share) : 0.5) : (share > 0.0 ? v / share : 0.5);
+    v = std::clamp(v, 0.0, below_one);
+    return upper ? 1 : 0;
+  };
+  size_t slab;
+  Vec3d v(m_slabs.sample_remapped(u.x, &slab), u.y, u.z);
+  int node = int(slab);
+  Vec3d lo(double(slab) / m_opt.slices, 0.0, 0.0), size(1.0 / m_opt.slices, 1.0, 1.0);
+  while (m_nodes[size_t(node)].child >= 0) {
+    const int first = m_nodes[size_t(node)].child;
+    auto prob = [&](int c) { return m_nodes[size_t(first + c)].prob; };
+    // Child c = bx | by << 1 | bz << 2 (partition()).
+    const int bx = choose(v.x, prob(0) + prob(2) + prob(4) + prob(6), m_nodes[size_t(node)].prob);
+    const int by = choose(v.y, prob(bx) + prob(bx | 4), prob(bx) + prob(bx | 2) + prob(bx | 4) + prob(bx | 6));
+    const int bz = choose(v.z, prob(bx | by << 1), prob(bx | by << 1) + prob(bx | by << 1 | 4));
+    const int c = bx | by << 1 | bz << 2;
+    size *= 0.5;
+    lo += Vec3d(bx, by, bz) * size;
+    node = first + c;
+  }
+  const Vec3 p = glm::min(Vec3(lo + size * v), Vec3(1.0f - 1e-7f));
   // The density of the leaf that holds p (rounding at a leaf's far face can land in the next one).
   *pdf = this->pdf(p);
   return p;

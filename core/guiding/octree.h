@@ -63,6 +63,7 @@ class BoundaryOctree : public BoundaryGuide {
   struct Node {
     int child = -1;  // first of 8 children, -1 for a leaf
     int leaf = -1;   // index into m_leaves for leaves
+    double prob = 0.0;  // of the leaves below
   };
   struct Leaf {
     Vec3 lo, size;
@@ -78,6 +79,7 @@ class BoundaryOctree : public BoundaryGuide {
   std::vector<Leaf> m_leaves;
   std::vector<float> m_prob;       // mixture probability of each leaf
   Distribution1D m_select;
+  Distribution1D m_slabs;          // the slabs' probabilities
   std::vector<float> m_first;      // density of the first coordinate on a fine regular grid
   size_t m_empty = 0;
   size_t m_splitting = 0;  // points that took part in the partition

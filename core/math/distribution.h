@@ -30,6 +30,8 @@ class Distribution1D {
   double integral() const { return m_integral; }
   // Probability of choosing bin i.
   float pmf(size_t i) const { return float(m_cdf[i + 1] - m_cdf[i]); }
+  // The probability of bins [0, i) (i <= size()).
+  double cdf(size_t i) const { return m_cdf[i]; }
   // Density on [0,1) of the continuous sample.
   float pdf(float x) const {
     const size_t i = std::min<size_t>(size_t(std::max(x, 0.0f) * m_func.size()), m_func.size() - 1);

@@ -4,10 +4,10 @@
 //     (y, z) = Sobol dimensions 0 and 1 at index j, Owen-scrambled,
 // so that (x, y, z) for n = 2^m is a (0, m, 3)-net in base 2 (Sobol's first two dimensions are a
 // (0, 2)-sequence; prefixing j / 2^m makes the net, Niederreiter 1992, Lemma 4.22), and the x of
-// consecutive samples are consecutive strata. The guides invert their CDF over cells or leaves
-// with x (core/guiding/guide.h), so a region of probability P receives n P samples give or take
-// one instead of a binomial count: the variance between regions, which includes the noise of the
-// octree's estimated leaf masses, is gone, and the samples within a region are stratified too.
+// consecutive samples are consecutive strata. The guides map the three numbers by marginals and
+// conditionals (core/guiding/grid.cpp, octree.cpp), each axis monotone in its own number, so a
+// region's count of samples follows its probability far more closely than a binomial count and
+// the samples inside it are stratified along every axis, the direction axes included.
 // Every point is uniform on [0,1)^3 (xi uniform; nested uniform scrambling, Owen 1995), so the
 // estimate stays unbiased, and calls with different seeds are independent.
 #pragma once
@@ -37,8 +37,7 @@ inline uint32_t sobol_dim1(uint32_t i) {
 
 // Nested uniform (Owen) scrambling of a 32-bit fraction: bit b (from the top) is flipped by a
 // hash of the seed, b and the bits above it, so every point is uniform and a net stays a net.
-// Only the top 24 bits are kept (the rest are zero): the points are multiples of 2^-24, as
-// Pcg32::next_float's are.
+// Only the top 24 bits are scrambled and kept (the rest are zero); point() fills the digits below.
 inline uint32_t owen_scramble(uint32_t v, uint64_t seed) {
   uint32_t out = 0;
   for (int b = 0; b < 24; ++b) {
@@ -53,12 +52,14 @@ inline uint32_t owen_scramble(uint32_t v, uint64_t seed) {
 class StratifiedSequence3 {
  public:
   StratifiedSequence3(uint64_t n, uint64_t seed) : m_n(n), m_seed_y(mix_bits(seed ^ 0x79)), m_seed_z(mix_bits(seed ^ 0x7a)) {}
-  // Point j (< n, < 2^32); xi from rng (one double).
+  // Point j (< n, < 2^32); xi and the digits below 2^-24 from rng (three doubles).
   Vec3d point(uint64_t j, Pcg32& rng) const {
     const double x = (double(j) + rng.next_double()) / double(m_n);
     const uint32_t i = uint32_t(j);
-    return Vec3d(x < 1.0 ? x : std::nextafter(1.0, 0.0), double(owen_scramble(sobol_dim0(i), m_seed_y) >> 8) * 0x1p-24,
-                 double(owen_scramble(sobol_dim1(i), m_seed_z) >> 8) * 0x1p-24);
+    // Below the scrambled 24 bits, a uniform offset: the deeper digits of a full nested scramble.
+    const double y = (double(owen_scramble(sobol_dim0(i), m_seed_y) >> 8) + rng.next_double()) * 0x1p-24;
+    const double z = (double(owen_scramble(sobol_dim1(i), m_seed_z) >> 8) + rng.next_double()) * 0x1p-24;
+    return Vec3d(x < 1.0 ? x : std::nextafter(1.0, 0.0), y, z);
   }
 
  private:

@@ -319,16 +319,23 @@ TEST_CASE("direction histogram: covers the peaks of the edges the projections mi
 
 namespace {
 
-// The u.x interval that `g` maps into one of its least probable regions (u.y, u.z fixed), found
-// on a lattice of 2^-20.
-std::pair<double, double> cold_run(const BoundaryGuide& g) {
+// u with u[axis] = t and the other two numbers fixed.
+Vec3d sweep_point(int axis, double t) {
+  Vec3d u(0.41, 0.3, 0.7);
+  u[axis] = t;
+  return u;
+}
+
+// The interval of u[axis] that `g` maps into one of its least probable regions (the other
+// numbers fixed), found on a lattice of 2^-20.
+std::pair<double, double> cold_run(const BoundaryGuide& g, int axis = 0) {
   const int n = 1 << 20;
   double best = 2.0, lo = 0.0, hi = 0.0, start = 0.0;
   size_t region = SIZE_MAX;
   for (int k = 0; k <= n; ++k) {
     const double u = (k + 0.5) / n;
     float pdf;
-    const size_t r = k < n ? g.region_of(g.sample(Vec3d(u, 0.3, 0.7), &pdf)) : SIZE_MAX;
+    const size_t r = k < n ? g.region_of(g.sample(sweep_point(axis, u), &pdf)) : SIZE_MAX;
     if (r == region) continue;
     const double end = u - 1.0 / n;
     if (region != SIZE_MAX && end > start && g.region_probability(region) < best) {
@@ -342,12 +349,13 @@ std::pair<double, double> cold_run(const BoundaryGuide& g) {
   return {lo, hi};
 }
 
-// Distinct first coordinates of the points for 4096 u.x values evenly spread over [a, b].
-size_t distinct_x(const BoundaryGuide& g, double a, double b) {
+// Distinct coordinates `axis` of the points for 4096 values of u[axis] from a on, 2^-26 apart
+// (a quarter of a float's spacing near 1, 2^-24), inside [a, b].
+size_t distinct_coordinates(const BoundaryGuide& g, double a, double b, int axis = 0) {
   std::vector<float> xs;
   for (int k = 0; k < 4096; ++k) {
     float pdf;
-    xs.push_back(g.sample(Vec3d(a + (b - a) * k / 4095.0, 0.3, 0.7), &pdf).x);
+    xs.push_back(g.sample(sweep_point(axis, std::min(a + k * 0x1p-26, b)), &pdf)[axis]);
   }
   std::sort(xs.begin(), xs.end());
   return size_t(std::unique(xs.begin(), xs.end()) - xs.begin());
@@ -355,10 +363,11 @@ size_t distinct_x(const BoundaryGuide& g, double a, double b) {
 
 }  // namespace
 
-TEST_CASE("guides keep the first number's precision: points inside a cold cell are not quantised") {
-  // u.x picks a cell and its remainder places the point along the first axis: with a float u.x
-  // a cell of probability p has only p 2^24 reachable points (here about 400 for the direction
-  // histogram's empty cells, whose points span the whole axis), with a double thousands.
+TEST_CASE("guides keep their numbers' precision: points inside a cold cell are not quantised") {
+  // The numbers pick a leaf or cell (the grid: u.x its slab, u.y its row, u.z the cell) and their
+  // remainders place the point: with float numbers a cell of (conditional) probability p has only
+  // p 2^24 reachable points along an axis (here a few hundred for the direction histogram's empty
+  // cells), with doubles thousands.
   Pcg32 rng(33);
   const auto pts = projected_points(3000, rng);
   std::vector<float> values;
@@ -367,13 +376,29 @@ TEST_CASE("guides keep the first number's precision: points inside a cold cell a
   auto grid = std::make_shared<BoundaryGrid>(std::array<int, 3>{64, 16, 32}, pts, values);
   auto directions = std::make_shared<BoundaryGrid>(std::array<int, 3>{1, 64, 64}, pts, values);
   const GuideMixture mix(std::make_shared<GuideMixture>(octree, grid, 0.5f), directions, 0.2f);
-  for (const BoundaryGuide* g : {static_cast<const BoundaryGuide*>(octree.get()), static_cast<const BoundaryGuide*>(directions.get())}) {
-    const auto [a, b] = cold_run(*g);
-    INFO(g->describe(), ": u.x in [", a, ", ", b, "]");
-    CHECK(b > a);
-    CHECK(distinct_x(*g, a, b) > 2000);
+  int checked = 0;
+  for (int axis = 0; axis < 3; ++axis)
+    for (const BoundaryGuide* g : {static_cast<const BoundaryGuide*>(octree.get()), static_cast<const BoundaryGuide*>(grid.get()),
+                                   static_cast<const BoundaryGuide*>(directions.get())}) {
+      if (g == directions.get() && axis == 0) continue;  // one slab: u.x is the point's x itself
+      const auto [a, b] = cold_run(*g, axis);
+      INFO(g->describe(), ", axis ", axis, ": u in [", a, ", ", b, "]");
+      CHECK(b > a);
+      // Only where the map stretches u[axis] can the points resolve u's spacing as floats.
+      float pdf;
+      const double stretch = g->region_box(g->region_of(g->sample(sweep_point(axis, 0.5 * (a + b)), &pdf))).size[axis] / (b - a);
+      if (stretch < 4.0) continue;
+      ++checked;
+      CHECK(distinct_coordinates(*g, a, b, axis) > 2000);
+    }
+  CHECK(checked >= 5);  // the octree along axis 0, the grid along 0 and 1, the histogram along 1 and 2
+  // The mixture hands u.y and u.z unchanged to the direction histogram (u.x < 0.2 picks it).
+  const auto [a, b] = cold_run(*directions, 2);
+  std::vector<float> zs;
+  for (int k = 0; k < 4096; ++k) {
+    float pdf;
+    zs.push_back(mix.sample(Vec3d(0.1, 0.3, std::min(a + k * 0x1p-26, b)), &pdf).z);
   }
-  // The mixture hands u.x / 0.2 to the direction histogram.
-  const auto [a, b] = cold_run(*directions);
-  CHECK(distinct_x(mix, 0.2 * a, 0.2 * b) > 2000);
+  std::sort(zs.begin(), zs.end());
+  CHECK(size_t(std::unique(zs.begin(), zs.end()) - zs.begin()) > 2000);
 }
