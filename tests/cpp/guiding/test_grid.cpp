@@ -38,7 +38,7 @@ TEST_CASE("grid guiding: pdf integrates to 1, sampling matches it, no zero-proba
 // The sampling map is the Knothe-Rosenblatt map (grid.cpp): u.x alone sets the slab along axis 0,
 // u.y then the row with the conditional probabilities given the slab, u.z the cell given the row,
 // each axis monotone in its number. So stratified points stay stratified along every axis; with
-// the cell picked from the row-major order by u.x alone (before the ninth pass of
+// the cell picked from the row-major order by u.x alone (before the tenth pass of
 // docs/reports/projective/README.md), sweeping u.y moved the point inside one cell only.
 TEST_CASE("grid guiding: samples follow the marginal along axis 0 and the conditionals along axes 1 and 2") {
   Pcg32 rng(11);
