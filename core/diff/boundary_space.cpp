@@ -89,7 +89,8 @@ BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_s
         std::stable_sort(ordered.begin(), ordered.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
         for (const auto& [code, ep] : ordered) {
           const MeshEdge& e = *ep;
-          m_segments.push_back({BoundarySegment::Kind::MeshEdge, si, moving, e.a, e.b, e.face0, e.face_count == 2 ? e.face1 : -1});
+          m_segments.push_back({BoundarySegment::Kind::MeshEdge, si, moving, e.a, e.b, e.face0, e.face_count == 2 ? e.face1 : -1,
+                                int(ep - m.edges.data())});
           m_measure.push_back(4.0f * kPi * glm::length(m.vertex(e.b) - m.vertex(e.a)));
           (moving ? moving_measure : static_measure) += m_measure.back();
         }
@@ -125,23 +126,27 @@ bool BoundarySpace::finish_edge(const BoundarySegment& s, float lambda, const Ve
   const Vec3 txw = glm::cross(t, w);
   const float sin_phi = glm::length(txw);
   if (!(sin_phi > 1e-6f)) return false;  // w along the edge: the edge is invisible in that direction
-  // A silhouette for rays along w: one face towards w, the other away (or an open edge).
+  // A silhouette for rays along w: every triangle at the edge lies on one side of the plane through
+  // the edge and w (n_b is that plane's normal, so n_b . (c - a) is the side of a triangle's third
+  // vertex c). A ray beside the edge then meets a triangle on that side only. For two triangles of a
+  // convex edge this is "one faces w, the other away"; an open edge always is one; a non-manifold
+  // edge is one only when its triangles do not straddle the plane.
+  out.n_b = txw / sin_phi;
+  const MeshEdge& e = m.edges[size_t(s.edge)];
+  int below = 0, above = 0;
+  m.for_each_edge_face(e, [&](int f) {
+    const float side = glm::dot(out.n_b, m.vertex(opposite_vertex(m, f, s.a, s.b)) - a);
+    below += side < 0.0f;
+    above += side > 0.0f;
+  });
+  if (below + above != e.face_count || (below > 0 && above > 0)) return false;  // straddled, or edge-on
+  if (above > 0) out.n_b = -out.n_b;  // away from the occluder
   const Vec3d n0 = m.face_normal(s.face0);
-  if (s.face1 >= 0) {
-    const Vec3d n1 = m.face_normal(s.face1);
-    if ((glm::dot(n0, Vec3d(w)) > 0.0) == (glm::dot(n1, Vec3d(w)) > 0.0)) return false;
-    out.n_out = Vec3(glm::normalize(n0 + n1));
-  } else {
-    out.n_out = Vec3(n0) * (glm::dot(n0, Vec3d(w)) >= 0.0 ? 1.0f : -1.0f);
-  }
+  if (e.face_count == 1) out.n_out = Vec3(n0) * (glm::dot(n0, Vec3d(w)) >= 0.0 ? 1.0f : -1.0f);
+  else if (e.face_count == 2) out.n_out = Vec3(glm::normalize(n0 + m.face_normal(e.face1)));
+  else out.n_out = out.n_b;  // the side no triangle is on
   out.xb = a + lambda * (b - a);
   out.w = w;
-  // Orient n_b away from the occluder: seen along w, the faces lie on the side of their third
-  // vertex (n_b is perpendicular to w and to the edge, so n_b . (c - a) is that side).
-  out.n_b = txw / sin_phi;
-  const float side = glm::dot(out.n_b, m.vertex(opposite_vertex(m, s.face0, s.a, s.b)) - a);
-  if (side == 0.0f) return false;
-  if (side > 0.0f) out.n_b = -out.n_b;
   out.jacobian = sin_phi;
   out.delta = probe_offset(len, out.xb);
   out.param = Vec3(lambda, 0.0f, 0.0f);

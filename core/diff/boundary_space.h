@@ -27,7 +27,8 @@ struct BoundarySegment {
   int shape;
   bool moving;                 // the shape's geometry is differentiable
   uint32_t a = 0, b = 0;       // edge vertices
-  int face0 = -1, face1 = -1;  // adjacent triangles (face1 = -1 on a boundary edge)
+  int face0 = -1, face1 = -1;  // adjacent triangles (face1 = -1 on a boundary or non-manifold edge)
+  int edge = -1;               // index into the mesh's edges (all of its triangles)
 };
 
 struct BoundaryPoint {

@@ -1,5 +1,7 @@
 #include "core/geometry/shapes/mesh.h"
 
+#include <algorithm>
+#include <array>
 #include <cstring>
 #include <unordered_map>
 #include "core/math/warp.h"
@@ -17,8 +19,15 @@ void Mesh::update_derived() {
     for (size_t f = 0; f < nt; ++f)
       for (int k = 0; k < 3; ++k) vertex_faces[fill[indices[3 * f + k]]++] = uint32_t(f);
     // Undirected edges: two triangles around a vertex share an edge when they share another vertex.
+    auto sorted_corners = [&](size_t f) {
+      std::array<uint32_t, 3> v{indices[3 * f], indices[3 * f + 1], indices[3 * f + 2]};
+      std::sort(v.begin(), v.end());
+      return v;
+    };
     std::unordered_map<uint64_t, size_t> slot;
+    std::unordered_map<size_t, std::vector<int>> more_of;  // non-manifold edges' later triangles, by edge
     edges.clear();
+    edge_more_faces.clear();
     for (size_t f = 0; f < nt; ++f)
       for (int k = 0; k < 3; ++k) {
         uint32_t a = indices[3 * f + k], b = indices[3 * f + (k + 1) % 3];
@@ -27,12 +36,24 @@ void Mesh::update_derived() {
         auto [it, inserted] = slot.try_emplace((uint64_t(a) << 32) | b, edges.size());
         if (inserted) {
           edges.push_back({a, b, int(f), -1, 1});
-        } else {
-          MeshEdge& e = edges[it->second];
-          if (e.face_count == 1) e.face1 = int(f);
-          e.face_count++;
+          continue;
         }
+        MeshEdge& e = edges[it->second];
+        const auto corners = sorted_corners(f);
+        bool duplicate = corners == sorted_corners(size_t(e.face0)) || (e.face1 >= 0 && corners == sorted_corners(size_t(e.face1)));
+        if (e.face_count > 2)
+          for (int g : more_of[it->second]) duplicate = duplicate || corners == sorted_corners(size_t(g));
+        if (duplicate) continue;
+        if (e.face_count == 1) e.face1 = int(f);
+        else more_of[it->second].push_back(int(f));
+        e.face_count++;
       }
+    for (size_t i = 0; i < edges.size(); ++i) {
+      if (edges[i].face_count <= 2) continue;
+      edges[i].more = uint32_t(edge_more_faces.size());
+      const std::vector<int>& faces = more_of[i];
+      edge_more_faces.insert(edge_more_faces.end(), faces.begin(), faces.end());
+    }
   }
   triangle_areas.assign(nt, 0.0f);
   vertex_normals.assign(face_normals ? 0 : vertex_count(), Vec3(0.0f));

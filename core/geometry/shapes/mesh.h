@@ -17,10 +17,13 @@ struct PositionSample {
 };
 
 // An undirected edge of the welded mesh with the triangles around it.
+// Triangles are counted once per vertex set: a scan's duplicated triangle (either winding) is one
+// surface, and counting it twice would make its edges look non-manifold.
 struct MeshEdge {
-  uint32_t a, b;      // vertices, a < b
-  int face0, face1;   // first two triangles (face1 = -1 on a boundary edge)
-  int face_count;     // 1: boundary, 2: manifold, more: non-manifold
+  uint32_t a, b;        // vertices, a < b
+  int face0, face1;     // first two distinct triangles (face1 = -1 on a boundary edge)
+  int face_count;       // distinct triangles: 1 boundary, 2 manifold, more non-manifold
+  uint32_t more = 0;    // non-manifold: the others are Mesh::edge_more_faces[more .. more + face_count - 2)
 };
 
 struct Mesh {
@@ -33,6 +36,7 @@ struct Mesh {
   std::vector<Vec3> vertex_normals;
   std::vector<uint32_t> vertex_face_offsets, vertex_faces;  // CSR: triangles around each vertex
   std::vector<MeshEdge> edges;                               // built once: the topology is fixed
+  std::vector<int> edge_more_faces;                          // non-manifold edges' third and later triangles
   std::vector<float> triangle_areas;
   Distribution1D area_distribution;  // triangles by area
   float total_area = 0.0f;
@@ -44,6 +48,14 @@ struct Mesh {
   Vec3d face_normal(int f) const {
     const Vec3 p0 = vertex(indices[3 * f]), p1 = vertex(indices[3 * f + 1]), p2 = vertex(indices[3 * f + 2]);
     return glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
+  }
+
+  // Calls f(face) for every distinct triangle at edge e.
+  template <typename F>
+  void for_each_edge_face(const MeshEdge& e, F&& f) const {
+    f(e.face0);
+    if (e.face1 >= 0) f(e.face1);
+    for (int k = 0; k + 2 < e.face_count; ++k) f(edge_more_faces[e.more + size_t(k)]);
   }
 
   void update_derived();

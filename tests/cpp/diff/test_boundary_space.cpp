@@ -5,6 +5,7 @@
 #include "core/diff/boundary_space.h"
 #include "core/io/scene_loader.h"
 #include "core/math/rng.h"
+#include "core/math/warp.h"
 
 #include <algorithm>
 #include <array>
@@ -151,4 +152,57 @@ TEST_CASE("boundary space: edges follow each other in space, whatever the mesh's
   const float ordered = median_extent(in_space), listed = median_extent(in_face_order);
   MESSAGE("median extent of 32 consecutive edges: in the space ", ordered, ", in face order ", listed);
   CHECK(ordered < 0.4f * listed);
+}
+
+TEST_CASE("mesh edges: a duplicated triangle counts once, in either winding") {
+  const std::string text = R"({
+    "type": "scene",
+    "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
+    "tet": {"type": "mesh", "vertex_positions": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+            "faces": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3], [0, 1, 3], [3, 2, 1]]}})";
+  auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
+  const Mesh& m = scene->shapes[0].mesh();
+  CHECK(m.edges.size() == 6);
+  for (const MeshEdge& e : m.edges) CHECK(e.face_count == 2);  // before: 3 or 4 on the duplicates' edges
+  CHECK(m.edge_more_faces.empty());
+}
+
+TEST_CASE("boundary space: a non-manifold edge is a silhouette only where its triangles lie on one side") {
+  // Three fins on the edge (0,0,0)-(0,0,1), their third vertices at 0, 30 and 60 degrees around it.
+  // Along w the edge bounds visibility exactly when no two fins straddle the plane through the edge
+  // and w; treating the edge as open (the rule before) made it a silhouette for every w.
+  const std::string text = R"({
+    "type": "scene",
+    "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
+    "fins": {"type": "mesh", "vertex_positions": [[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [0.8660254, 0.5, 0.5], [0.5, 0.8660254, 0.5]],
+             "faces": [[0, 1, 2], [1, 0, 3], [0, 1, 4]]}})";
+  auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
+  const DiffParams params(*scene, {"fins.vertex_positions"});
+  const BoundarySpace space(*scene, params);
+  const Mesh& m = scene->shapes[0].mesh();
+  const std::array<Vec3, 3> fin{m.vertex(2), m.vertex(3), m.vertex(4)};
+  Pcg32 rng(5);
+  int on_edge = 0, silhouettes = 0, expected_silhouettes = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const Vec3 u(rng.next_float(), rng.next_float(), rng.next_float());
+    BoundaryPoint p;
+    const bool ok = space.sample(u, 1.0f, p);
+    const BoundarySegment& s = space.segments()[size_t(p.segment)];
+    if (!(s.a == 0 && s.b == 1)) continue;
+    ++on_edge;
+    const Vec3 w = warp::square_to_uniform_sphere(Vec2(u.y, u.z));
+    const Vec3 n = glm::normalize(glm::cross(Vec3(0, 0, 1), w));
+    int below = 0;
+    for (const Vec3& c : fin) below += glm::dot(n, c - Vec3(0.0f)) < 0.0f;
+    const bool one_side = below == 0 || below == 3;
+    expected_silhouettes += one_side;
+    silhouettes += ok;
+    CHECK(ok == one_side);
+    if (ok)
+      for (const Vec3& c : fin) CHECK(glm::dot(p.n_b, c - p.xb) < 0.0f);  // n_b points away from every fin
+  }
+  CHECK(on_edge > 500);
+  CHECK(expected_silhouettes > 100);
+  CHECK(expected_silhouettes < on_edge - 100);
+  CHECK(silhouettes == expected_silhouettes);
 }
