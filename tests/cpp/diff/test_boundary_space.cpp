@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <sstream>
+#include <vector>
 
 using namespace limn;
 
@@ -155,16 +156,28 @@ TEST_CASE("boundary space: edges follow each other in space, whatever the mesh's
 }
 
 TEST_CASE("mesh edges: a duplicated triangle counts once, in either winding") {
+  // A tetrahedron (faces 0, 1, 3, 4) with fins on edges (0,1) (face 5) and (2,3) (face 6), and
+  // duplicates: 2 of 1 (opposite winding, before the fin arrives), 7 of 5 and 8 of 6 (after it).
   const std::string text = R"({
     "type": "scene",
     "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
-    "tet": {"type": "mesh", "vertex_positions": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
-            "faces": [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3], [0, 1, 3], [3, 2, 1]]}})";
+    "tet": {"type": "mesh",
+            "vertex_positions": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.5, -1, -1], [-1, 1, 1]],
+            "faces": [[0, 2, 1], [0, 1, 3], [1, 0, 3], [0, 3, 2], [1, 2, 3], [0, 1, 4], [3, 2, 5], [0, 1, 4], [2, 3, 5]]}})";
   auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
   const Mesh& m = scene->shapes[0].mesh();
-  CHECK(m.edges.size() == 6);
-  for (const MeshEdge& e : m.edges) CHECK(e.face_count == 2);  // before: 3 or 4 on the duplicates' edges
-  CHECK(m.edge_more_faces.empty());
+  CHECK(m.edges.size() == 10);
+  CHECK(m.edge_more_faces.size() == 2);
+  for (const MeshEdge& e : m.edges) {
+    std::vector<int> faces;
+    m.for_each_edge_face(e, [&](int f) { faces.push_back(f); });
+    std::sort(faces.begin(), faces.end());
+    CHECK(int(faces.size()) == e.face_count);
+    if (e.a == 0 && e.b == 1) CHECK(faces == std::vector<int>{0, 1, 5});  // before: 5 triangles
+    else if (e.a == 2 && e.b == 3) CHECK(faces == std::vector<int>{3, 4, 6});
+    else if (e.b >= 4) CHECK(e.face_count == 1);  // the fins' open edges
+    else CHECK(e.face_count == 2);
+  }
 }
 
 TEST_CASE("boundary space: a non-manifold edge is a silhouette only where its triangles lie on one side") {
