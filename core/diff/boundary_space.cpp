@@ -50,10 +50,23 @@ bool edge_can_be_silhouette(const Mesh& m, const MeshEdge& e) {
   if (e.face_count != 2) return true;
   // Convex and not flat: the third vertex of one face lies strictly below the other's plane (1e-6 of
   // the edge length: below that the dihedral angle is numerically flat).
-  const Vec3d n0 = m.face_normal(e.face0);
+  const Vec3d n0 = m.oriented_normal(e.face0);
   const Vec3 c = m.vertex(opposite_vertex(m, e.face1, e.a, e.b));
   const double h = glm::dot(n0, Vec3d(c - m.vertex(e.a)));
   return h < -1e-6 * glm::length(Vec3d(m.vertex(e.b) - m.vertex(e.a)));
+}
+
+int edge_side(const Mesh& m, const MeshEdge& e, const Vec3& d) {
+  // The side of each triangle's third vertex c: the sign of (b - a) x d . (c - a).
+  const Vec3 a = m.vertex(e.a), n = glm::cross(m.vertex(e.b) - a, d);
+  int below = 0, above = 0;
+  m.for_each_edge_face(e, [&](int f) {
+    const float side = glm::dot(n, m.vertex(opposite_vertex(m, f, e.a, e.b)) - a);
+    below += side < 0.0f;
+    above += side > 0.0f;
+  });
+  if (below + above != e.face_count || (below > 0 && above > 0)) return 0;  // straddled, or edge-on
+  return above > 0 ? 1 : -1;
 }
 
 BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
@@ -126,24 +139,13 @@ bool BoundarySpace::finish_edge(const BoundarySegment& s, float lambda, const Ve
   const Vec3 txw = glm::cross(t, w);
   const float sin_phi = glm::length(txw);
   if (!(sin_phi > 1e-6f)) return false;  // w along the edge: the edge is invisible in that direction
-  // A silhouette for rays along w: every triangle at the edge lies on one side of the plane through
-  // the edge and w (n_b is that plane's normal, so n_b . (c - a) is the side of a triangle's third
-  // vertex c). A ray beside the edge then meets a triangle on that side only. For two triangles of a
-  // convex edge this is "one faces w, the other away"; an open edge always is one; a non-manifold
-  // edge is one only when its triangles do not straddle the plane.
-  out.n_b = txw / sin_phi;
   const MeshEdge& e = m.edges[size_t(s.edge)];
-  int below = 0, above = 0;
-  m.for_each_edge_face(e, [&](int f) {
-    const float side = glm::dot(out.n_b, m.vertex(opposite_vertex(m, f, s.a, s.b)) - a);
-    below += side < 0.0f;
-    above += side > 0.0f;
-  });
-  if (below + above != e.face_count || (below > 0 && above > 0)) return false;  // straddled, or edge-on
-  if (above > 0) out.n_b = -out.n_b;  // away from the occluder
-  const Vec3d n0 = m.face_normal(s.face0);
+  const int side = edge_side(m, e, w);
+  if (side == 0) return false;
+  out.n_b = txw / sin_phi * float(-side);  // away from the occluder
+  const Vec3d n0 = m.oriented_normal(s.face0);
   if (e.face_count == 1) out.n_out = Vec3(n0) * (glm::dot(n0, Vec3d(w)) >= 0.0 ? 1.0f : -1.0f);
-  else if (e.face_count == 2) out.n_out = Vec3(glm::normalize(n0 + m.face_normal(e.face1)));
+  else if (e.face_count == 2) out.n_out = Vec3(glm::normalize(n0 + m.oriented_normal(e.face1)));
   else out.n_out = out.n_b;  // the side no triangle is on
   out.xb = a + lambda * (b - a);
   out.w = w;

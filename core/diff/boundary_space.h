@@ -85,4 +85,12 @@ class BoundarySpace {
 // non-flat edges.
 bool edge_can_be_silhouette(const Mesh& m, const MeshEdge& e);
 
+// The silhouette rule of the indirect term and of the projections: edge e is a silhouette for rays
+// along d (any length) when all of its triangles lie on one side of the plane through the edge and
+// d; a ray beside the edge then meets triangles on that side only. Returns that side, +1 where
+// (b - a) x d points (towards the triangles: n_b is the other way), -1 the other, 0 when they
+// straddle the plane or one lies in it. Winding-free; for the two triangles of a convex edge it is
+// "one faces d, the other away"; an open edge is a silhouette for every d off its triangle's plane.
+int edge_side(const Mesh& m, const MeshEdge& e, const Vec3& d);
+
 }  // namespace limn

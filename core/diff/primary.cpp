@@ -55,7 +55,7 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, i
         const Vec3 p0 = m.vertex(m.indices[3 * f]);
         // Front-facing with a margin: a face within 1e-6 (cosine) of edge-on projects to no area
         // whichever way rounding tips it, and must not make a second outline next to the real one.
-        return glm::dot(m.face_normal(f), glm::normalize(Vec3d(eye.x, eye.y, eye.z) - Vec3d(p0))) > 1e-6;
+        return glm::dot(m.oriented_normal(f), glm::normalize(Vec3d(eye.x, eye.y, eye.z) - Vec3d(p0))) > 1e-6;
       };
       for (const MeshEdge& e : m.edges) {
         bool candidate = e.face_count != 2;  // boundary or non-manifold edges are always candidates
@@ -65,7 +65,7 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, i
         // Creases with a back-facing face are hidden or are silhouettes already; including them
         // would count an outline twice where a face is seen exactly edge-on.
         if (!candidate && m.face_normals && faces_eye(e.face0) && faces_eye(e.face1))
-          candidate = glm::dot(m.face_normal(e.face0), m.face_normal(e.face1)) < 1.0 - 1e-6;
+          candidate = glm::dot(m.oriented_normal(e.face0), m.oriented_normal(e.face1)) < 1.0 - 1e-6;
         if (!candidate) continue;
         const int a = int(e.a), b = int(e.b);
         Vec2d sa, sb;

@@ -1,6 +1,7 @@
 #include "core/diff/projection.h"
 
 #include <algorithm>
+#include <array>
 #include <map>
 #include <tuple>
 #include "core/math/frame.h"
@@ -10,47 +11,20 @@ namespace {
 
 constexpr int kWalkSteps = 30;  // the paper's hybrid: 30 WALK, 1 JUMP, 30 WALK
 
-// Cosine between triangle f's normal and the direction from its centroid to xa.
+// Cosine between triangle f's oriented normal and the direction from its centroid to xa.
 double facing(const Mesh& m, int f, const Vec3& xa) {
   const uint32_t* i = &m.indices[3 * size_t(f)];
   const Vec3d c = (Vec3d(m.vertex(i[0])) + Vec3d(m.vertex(i[1])) + Vec3d(m.vertex(i[2]))) / 3.0;
   const Vec3d d = Vec3d(xa) - c;
   const double len = glm::length(d);
-  return len > 0.0 ? glm::dot(m.face_normal(f), d) / len : 0.0;
+  return len > 0.0 ? glm::dot(m.oriented_normal(f), d) / len : 0.0;
 }
 
-// Whether the edge point x is a silhouette seen from xa: its two faces look at xa from opposite sides.
-bool silhouette_at(const Mesh& m, int f0, int f1, const Vec3& xa, const Vec3& x) {
-  if (f1 < 0) return true;
-  return glm::dot(m.face_normal(f0), Vec3d(xa - x)) * glm::dot(m.face_normal(f1), Vec3d(xa - x)) < 0.0;
-}
-
-// The parameter in (0, 1) of the edge a-b nearest to lambda0 where it is a silhouette seen from xa
-// (both facing tests are linear along the edge, so the valid set is an interval), or -1.
-float silhouette_parameter(const Mesh& m, int f0, int f1, const Vec3& a, const Vec3& b, const Vec3& xa, float lambda0) {
-  constexpr float lo = 1e-4f, hi = 1.0f - 1e-4f;  // off the vertices, where other faces decide
-  lambda0 = std::clamp(lambda0, lo, hi);
-  if (silhouette_at(m, f0, f1, xa, a + lambda0 * (b - a))) return lambda0;
-  float cuts[4] = {lo, hi, lo, lo};
-  int n = 2;
-  for (int f : {f0, f1}) {
-    const Vec3d nf = m.face_normal(f);
-    const double den = glm::dot(nf, Vec3d(b - a));
-    if (den != 0.0) {
-      const double r = glm::dot(nf, Vec3d(xa - a)) / den;
-      if (r > lo && r < hi) cuts[n++] = float(r);
-    }
-  }
-  for (int i = 1; i < n; ++i)  // insertion sort of at most 4 values
-    for (int j = i; j > 0 && cuts[j] < cuts[j - 1]; --j) std::swap(cuts[j], cuts[j - 1]);
-  float best = -1.0f;
-  for (int i = 0; i + 1 < n; ++i) {
-    const float mid = 0.5f * (cuts[i] + cuts[i + 1]);
-    if (cuts[i + 1] - cuts[i] <= 0.0f || !silhouette_at(m, f0, f1, xa, a + mid * (b - a))) continue;
-    const float c = std::clamp(lambda0, cuts[i] + 0.01f * (cuts[i + 1] - cuts[i]), cuts[i + 1] - 0.01f * (cuts[i + 1] - cuts[i]));
-    if (best < 0.0f || std::abs(c - lambda0) < std::abs(best - lambda0)) best = c;
-  }
-  return best;
+// Whether segment s's edge is a silhouette seen from xa, by the boundary sample space's own rule
+// (edge_side). The plane through the edge and xa - x is the same for every x on the edge, so the
+// answer holds along the whole edge.
+bool silhouette_from(const Mesh& m, const BoundarySegment& s, const Vec3& xa) {
+  return edge_side(m, m.edges[size_t(s.edge)], xa - m.vertex(s.a)) != 0;
 }
 
 Vec3 closest_on_segment(const Vec3& a, const Vec3& b, const Vec3& p, float& lambda) {
@@ -85,10 +59,18 @@ Projector::Projector(const Scene& scene, const BoundarySpace& space, MeshProject
       }
       return -1;
     };
+    t.canonical.resize(F);
+    std::map<std::array<uint32_t, 3>, int> first;
+    for (size_t f = 0; f < F; ++f) {
+      std::array<uint32_t, 3> corners{m.indices[3 * f], m.indices[3 * f + 1], m.indices[3 * f + 2]};
+      std::sort(corners.begin(), corners.end());
+      t.canonical[f] = first.try_emplace(corners, int(f)).first->second;
+    }
     t.normals.assign(m.vertex_count(), Vec3(0.0f));
     for (size_t f = 0; f < F; ++f) {
+      if (t.canonical[f] != int(f)) continue;  // a duplicate in the other winding would cancel its twin
       const uint32_t* i = &m.indices[3 * f];
-      const Vec3 c = glm::cross(m.vertex(i[1]) - m.vertex(i[0]), m.vertex(i[2]) - m.vertex(i[0]));
+      const Vec3 c = float(m.orientation[f]) * glm::cross(m.vertex(i[1]) - m.vertex(i[0]), m.vertex(i[2]) - m.vertex(i[0]));
       if (std::isfinite(c.x + c.y + c.z))
         for (int k = 0; k < 3; ++k) t.normals[i[k]] += c;
     }
@@ -120,11 +102,9 @@ std::optional<Projection> Projector::finish(int segment, const Vec3& xa, const V
   if (s.kind == BoundarySegment::Kind::MeshEdge) {
     const Mesh& m = m_scene.shapes[s.shape].mesh();
     const Vec3 a = m.vertex(s.a), b = m.vertex(s.b);
+    if (found && !silhouette_from(m, s, xa)) return std::nullopt;
     float lambda;
-    closest_on_segment(a, b, near, lambda);
-    if (found) lambda = silhouette_parameter(m, s.face0, s.face1, a, b, xa, lambda);
-    if (lambda < 0.0f) return std::nullopt;
-    xb = a + lambda * (b - a);
+    xb = closest_on_segment(a, b, near, lambda);
   }
   // Section 5: an approximate boundary segment x'_a -> x'_b suffices. Keeping the original direction
   // (made tangential on spheres) and letting x_a slide keeps what the segment saw at x_a, e.g. a
@@ -188,12 +168,10 @@ int Projector::walk(int shape, const Vec3& xa, const Vec3& near, int& f, int ste
     for (int k = 0; k < 3; ++k) {
       const int g = t.neighbour[3 * size_t(f) + k], seg = t.segment[3 * size_t(f) + k];
       const Vec3 a = m.vertex(m.indices[3 * size_t(f) + k]), b = m.vertex(m.indices[3 * size_t(f) + (k + 1) % 3]);
-      if (seg >= 0) {  // an open edge, or the exact test along it (ranked by its silhouette point nearest to `near`)
+      if (seg >= 0 && silhouette_from(m, m_space.segments()[size_t(seg)], xa)) {  // ranked by its point nearest to `near`
         float lambda;
-        closest_on_segment(a, b, near, lambda);
-        if (g >= 0) lambda = silhouette_parameter(m, f, g, a, b, xa, lambda);
-        const float dist = lambda >= 0.0f ? glm::length(a + lambda * (b - a) - near) : kInfinity;
-        if (found < 0 ? lambda >= 0.0f : dist < found_dist) found = seg, found_dist = dist;
+        const float dist = glm::length(closest_on_segment(a, b, near, lambda) - near);
+        if (found < 0 || dist < found_dist) found = seg, found_dist = dist;
       }
       if (g < 0) {
         score[k] = -1.0;
@@ -244,7 +222,7 @@ bool Projector::jump(int shape, const Vec3& xa, int& f, Vec3& p) const {
   const float h = float(glm::length(q - Vec3d(p))) + 1e-3f * float(std::sqrt(std::max(g11, g22)));
   SurfaceInteraction si;
   if (!m_scene.intersect(Ray{Vec3(q) + h * nqf, -nqf, 0.0f, 2.0f * h}, si) || si.shape != shape) return false;
-  f = si.prim;
+  f = m_meshes.at(shape).canonical[size_t(si.prim)];
   p = si.p;
   return true;
 }
@@ -267,7 +245,7 @@ std::optional<Projection> Projector::snap(int shape, int f, const Vec3& xa, cons
   const Vec3 w0 = glm::normalize(xa - best_point);
   if (s.face1 < 0) return finish(best, xa, best_point, false, w0);
   // Both faces see w0 alike: tilt w0 just past the plane of the face it is closest to.
-  const Vec3 n0 = Vec3(m.face_normal(s.face0)), n1 = Vec3(m.face_normal(s.face1));
+  const Vec3 n0 = Vec3(m.oriented_normal(s.face0)), n1 = Vec3(m.oriented_normal(s.face1));
   const Vec3 nk = std::abs(glm::dot(n0, w0)) < std::abs(glm::dot(n1, w0)) ? n0 : n1;
   const Vec3 w = glm::normalize(w0 - (1.0f + 1e-3f) * glm::dot(nk, w0) * nk);
   const Vec3 u = m_space.invert(best, best_point, w);
@@ -277,7 +255,7 @@ std::optional<Projection> Projector::snap(int shape, int f, const Vec3& xa, cons
 }
 
 std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceInteraction& hit, Pcg32& rng) const {
-  int f = hit.prim, taken = 0;
+  int f = m_meshes.at(hit.shape).canonical[size_t(hit.prim)], taken = 0;  // a duplicate has no neighbours of its own
   Vec3 p = hit.p;
   int seg = -1;
   if (m_mode != MeshProjection::Jump) seg = walk(hit.shape, xa, hit.p, f, kWalkSteps, rng, taken);

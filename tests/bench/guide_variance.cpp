@@ -16,7 +16,9 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <string>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include "core/diff/indirect.h"
 #include "core/diff/render_diff.h"
@@ -29,7 +31,7 @@ using namespace limn;
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D] [--direction-octaves K] [--leaf-samples N]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D] [--direction-octaves K] [--leaf-samples N] [--octree-depth D]\n", argv[0]);
     return 2;
   }
   int seeds = 4, qspp = 2048, spp = 1024, tail = 0;
@@ -44,6 +46,7 @@ int main(int argc, char** argv) {
     else if (k == "--direction-resolution") tested.direction_resolution = std::stoi(argv[a + 1]);
     else if (k == "--direction-octaves") tested.direction_octaves = std::stoi(argv[a + 1]);
     else if (k == "--leaf-samples") tested.octree.leaf_samples = std::stoi(argv[a + 1]);
+    else if (k == "--octree-depth") tested.octree.max_depth = std::stoi(argv[a + 1]);
     else {
       std::fprintf(stderr, "unknown option %s\n", argv[a]);
       return 2;
@@ -62,6 +65,7 @@ int main(int argc, char** argv) {
         o.direction_resolution = tested.direction_resolution;
         o.direction_octaves = tested.direction_octaves;
         o.octree.leaf_samples = tested.octree.leaf_samples;
+        o.octree.max_depth = tested.octree.max_depth;
       }
       o.guiding = guiding;
       o.direction_mix = direction_mix;
@@ -78,6 +82,14 @@ int main(int argc, char** argv) {
     std::vector<Vec3> u(M);
     std::vector<double> fq(M, 0.0);   // f / q, 0 where f or q is not usable
     std::vector<double> f2q(M, 0.0);  // f^2 / q = (f/q)^2 q: E_q[f2q / p] = E_p[(f/p)^2]
+    // The image's integrand: the sample's derivative image g (every splat's value times its
+    // velocity along the tangent, x translation), as render_forward adds it. Kept per sample:
+    // |g|^2 q (E_q[|g|^2 q / p] = E_p[|f/p|^2] for any guide p) and |g|; summed: the image E_q[g].
+    std::vector<double> g2q(M, 0.0), gnorm(M, 0.0);
+    std::vector<double> tangent(params.slot_count(), 0.0);
+    for (size_t s = 0; s < tangent.size(); s += 3) tangent[s] = 1.0;
+    const size_t pixels = size_t(scene->camera.width) * scene->camera.height;
+    tbb::enumerable_thread_specific<std::vector<double>> images(std::vector<double>(3 * pixels, 0.0));
     tbb::parallel_for(size_t(0), M, [&](size_t i) {
       Pcg32 rng = pixel_rng(mix_bits(424242), i);
       float pdf;
@@ -87,7 +99,37 @@ int main(int argc, char** argv) {
         fq[i] = double(f) / pdf;
         f2q[i] = fq[i] * double(f);
       }
+      if (!(pdf > 0.0f)) return;
+      ad::Tape::current().clear();
+      PathInputs in;
+      std::vector<IndirectBoundary::Splat> splats;
+      std::vector<ad::Var> vel;
+      uint64_t rays = 0;
+      ib.sample_at(u[i], pdf, q->pdf_first(u[i].x), rng, in, splats, vel, rays);
+      std::vector<double> d(vel.size(), 0.0), adj;
+      for (size_t k = 0; k < vel.size(); ++k) {
+        if (vel[k].is_constant()) continue;
+        ad::Tape::current().backward(vel[k].idx, 1.0, adj);
+        for (const auto& [node, slot] : in.nodes) d[k] += adj[node] * tangent[slot];
+      }
+      std::map<size_t, double> g;  // (pixel, channel) -> value of this sample
+      for (const auto& sp : splats)
+        for (int c = 0; c < 3; ++c) g[3 * size_t(sp.pixel) + c] += double(sp.value[c]) * d[size_t(sp.velocity)];
+      double n2 = 0.0;
+      for (const auto& [k, v] : g) n2 += v * v;
+      if (!std::isfinite(n2)) return;  // counted as zero, as render_forward drops it
+      std::vector<double>& im = images.local();
+      for (const auto& [k, v] : g) im[k] += v / double(M);
+      g2q[i] = n2 * pdf;
+      gnorm[i] = std::sqrt(n2);
     });
+    ad::Tape::current().clear();
+    std::vector<double> image(3 * pixels, 0.0);
+    for (const auto& im : images)
+      for (size_t k = 0; k < image.size(); ++k) image[k] += im[k];
+    double image2 = 0.0, mean_norm = 0.0;
+    for (double v : image) image2 += v * v;
+    for (double v : gnorm) mean_norm += v / double(M);
     double F = 0.0, s2 = 0.0;
     for (double w : fq) {
       F += w / double(M);
@@ -120,26 +162,50 @@ int main(int argc, char** argv) {
                   "(the least any such grid can have), %.0f with exact cell integrals and the 10 %% defensive share.\n\n",
                   res[0], res[1], res[2], root * root / (F * F) - 1.0, exact / (F * F) - 1.0);
     }
-    std::printf("| guide | direction histogram | relative variance per guide seed | mean |\n|---|---|---|---|\n");
+    // The derivative image's variance per sample, Var_p = E_p[|f/p|^2] - |I|^2 summed over pixels
+    // and channels, relative to |I|^2. No density does better than p ~ |f| (independent samples),
+    // whose Var is (int |f|)^2 - |I|^2; computed with E|f| where f is random (path-traced L_d and
+    // importance), so it is at most the true floor (int sqrt(E|f|^2))^2 - |I|^2.
+    const double n_render = double(spp) * double(pixels);
+    auto noise = [&](double rv) { return std::sqrt(std::max(rv, 0.0) / n_render); };
+    const double floor_rv = mean_norm * mean_norm / image2 - 1.0;
+    double q_image_m2 = 0.0, ideal_image_m2 = 0.0;  // E_p[|f/p|^2] for q, and for p = f / F (the guides' ideal)
+    for (size_t i = 0; i < M; ++i) {
+      q_image_m2 += gnorm[i] * gnorm[i] / double(M);
+      if (fq[i] > 0.0) ideal_image_m2 += F * gnorm[i] * gnorm[i] / fq[i] / double(M);  // |g|^2 q / p, p = f / F = fq q / F
+    }
+    std::printf("Derivative image (x translation): relative variance per sample %.0f for the wide proposal, %.0f for the best "
+                "density any guide could have (p ~ |f|, independent samples), %.0f for the density the guides aim at (p ~ the guides' "
+                "integrand, without the velocity); at %d spp the best density's run-to-run noise is %.4f of the image's RMS.\n\n",
+                q_image_m2 / image2 - 1.0, floor_rv, ideal_image_m2 / image2 - 1.0, spp, noise(floor_rv));
+    std::printf("| guide | direction histogram | relative variance per guide seed | mean | derivative image: relative variance per guide seed | mean | noise at %d spp | over the best density |\n"
+                "|---|---|---|---|---|---|---|---|\n", spp);
     for (const std::string guiding : {"grid", "octree"})
       for (const float mix : {0.0f, kDirectionMix}) {
-        std::string cells;
-        double sum = 0.0;
+        std::string cells, image_cells;
+        double sum = 0.0, image_sum = 0.0;
         for (int t = 0; t < seeds; ++t) {
           const auto p = build_boundary_guide(*scene, ib, options(guiding, mix, 7 + 1000 * uint64_t(t), true));
-          std::vector<double> part(M);
+          std::vector<double> part(M), image_part(M);
           tbb::parallel_for(size_t(0), M, [&](size_t i) {
             const float pu = p->pdf(u[i]);
             part[i] = pu > 0.0f ? f2q[i] / pu : 0.0;
+            image_part[i] = pu > 0.0f ? g2q[i] / pu : 0.0;
           });
-          double m2 = 0.0;
-          for (double v : part) m2 += v / double(M);
-          const double rv = m2 / (F * F) - 1.0;
+          double m2 = 0.0, image_m2 = 0.0;
+          for (size_t i = 0; i < M; ++i) {
+            m2 += part[i] / double(M);
+            image_m2 += image_part[i] / double(M);
+          }
+          const double rv = m2 / (F * F) - 1.0, image_rv = image_m2 / image2 - 1.0;
           sum += rv / seeds;
+          image_sum += image_rv / seeds;
           cells += (t ? " " : "") + std::to_string(int(std::lround(rv)));
+          image_cells += (t ? " " : "") + std::to_string(int(std::lround(image_rv)));
         }
-        std::printf("| %s | %s | %s | %.0f |\n", guiding == "grid" ? "projective grid" : "octree",
-                    mix > 0.0f ? (std::to_string(int(mix * 100.0f + 0.5f)) + " %").c_str() : "off", cells.c_str(), sum);
+        std::printf("| %s | %s | %s | %.0f | %s | %.0f | %.4f | %.2fx |\n", guiding == "grid" ? "projective grid" : "octree",
+                    mix > 0.0f ? (std::to_string(int(mix * 100.0f + 0.5f)) + " %").c_str() : "off", cells.c_str(), sum,
+                    image_cells.c_str(), image_sum, noise(image_sum), noise(image_sum) / noise(floor_rv));
         std::fflush(stdout);
       }
     if (tail > 0) {

@@ -54,13 +54,14 @@ void Mesh::update_derived() {
       const std::vector<int>& faces = more_of[i];
       edge_more_faces.insert(edge_more_faces.end(), faces.begin(), faces.end());
     }
+    orient();
   }
   triangle_areas.assign(nt, 0.0f);
   vertex_normals.assign(face_normals ? 0 : vertex_count(), Vec3(0.0f));
   double total = 0.0;
   for (size_t f = 0; f < nt; ++f) {
     const uint32_t i0 = indices[3 * f], i1 = indices[3 * f + 1], i2 = indices[3 * f + 2];
-    const Vec3 c = glm::cross(vertex(i1) - vertex(i0), vertex(i2) - vertex(i0));
+    const Vec3 c = float(orientation[f]) * glm::cross(vertex(i1) - vertex(i0), vertex(i2) - vertex(i0));
     const float area = 0.5f * glm::length(c);
     triangle_areas[f] = std::isfinite(area) ? area : 0.0f;
     total += triangle_areas[f];
@@ -74,6 +75,102 @@ void Mesh::update_derived() {
   }
   total_area = float(total);
   area_distribution = nt > 0 ? Distribution1D(triangle_areas) : Distribution1D();
+}
+
+namespace {
+
+// +1 when triangle f runs along its edge from a to b, -1 when from b to a, 0 when it has no such edge.
+int edge_direction(const std::vector<uint32_t>& indices, int f, uint32_t a, uint32_t b) {
+  for (int k = 0; k < 3; ++k) {
+    const uint32_t p = indices[3 * size_t(f) + k], q = indices[3 * size_t(f) + (k + 1) % 3];
+    if (p == a && q == b) return 1;
+    if (p == b && q == a) return -1;
+  }
+  return 0;
+}
+
+}  // namespace
+
+void Mesh::orient() {
+  const size_t nt = triangle_count();
+  orientation.assign(nt, 0);
+  orientation_conflicts = 0;
+  // Triangles across each two-triangle edge, and the duplicates' twins (the triangle the edges kept).
+  std::vector<std::vector<std::pair<int, size_t>>> across(nt);  // (neighbour, edge)
+  std::vector<int> twin(nt, -1);
+  std::vector<char> counted(nt, 0);
+  for (size_t i = 0; i < edges.size(); ++i) {
+    const MeshEdge& e = edges[i];
+    for_each_edge_face(e, [&](int f) { counted[size_t(f)] = 1; });
+    if (e.face_count != 2) continue;
+    across[size_t(e.face0)].push_back({e.face1, i});
+    across[size_t(e.face1)].push_back({e.face0, i});
+  }
+  {
+    std::unordered_map<uint64_t, std::vector<int>> by_corner;  // counted triangles by their lowest corner
+    auto sorted = [&](size_t f) {
+      std::array<uint32_t, 3> v{indices[3 * f], indices[3 * f + 1], indices[3 * f + 2]};
+      std::sort(v.begin(), v.end());
+      return v;
+    };
+    for (size_t f = 0; f < nt; ++f)
+      if (counted[f]) by_corner[sorted(f)[0]].push_back(int(f));
+    for (size_t f = 0; f < nt; ++f) {
+      if (counted[f]) continue;
+      auto it = by_corner.find(sorted(f)[0]);
+      if (it == by_corner.end()) continue;
+      for (int g : it->second)
+        if (sorted(size_t(g)) == sorted(f)) twin[f] = g;
+    }
+  }
+  // Breadth-first over each connected part: a neighbour that runs along the shared edge the same
+  // way as its triangle is flipped relative to it.
+  std::vector<int> queue;
+  for (size_t seed = 0; seed < nt; ++seed) {
+    if (orientation[seed] != 0 || !counted[seed]) continue;
+    queue.assign(1, int(seed));
+    orientation[seed] = 1;
+    double volume = 0.0, area = 0.0;
+    bool closed = true;
+    for (size_t head = 0; head < queue.size(); ++head) {
+      const int f = queue[head];
+      const uint32_t* i = &indices[3 * size_t(f)];
+      const Vec3d p0(vertex(i[0])), p1(vertex(i[1])), p2(vertex(i[2]));
+      const Vec3d c = glm::cross(p1 - p0, p2 - p0);
+      if (std::isfinite(c.x + c.y + c.z)) {
+        volume += orientation[size_t(f)] * glm::dot(p0, c) / 6.0;  // divergence theorem, one tetrahedron per triangle
+        area += orientation[size_t(f)] * 0.5 * glm::length(c);
+      }
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t a = i[k], b = i[(k + 1) % 3];
+        bool manifold = false;
+        for (const auto& [g, ei] : across[size_t(f)]) {
+          const MeshEdge& e = edges[ei];
+          if (!((e.a == a && e.b == b) || (e.a == b && e.b == a))) continue;
+          manifold = true;
+          const int8_t want = int8_t(edge_direction(indices, f, a, b) == edge_direction(indices, g, a, b) ? -orientation[size_t(f)]
+                                                                                                           : orientation[size_t(f)]);
+          if (orientation[size_t(g)] == 0) {
+            orientation[size_t(g)] = want;
+            queue.push_back(g);
+          } else if (orientation[size_t(g)] != want && f < g) {
+            ++orientation_conflicts;
+          }
+        }
+        if (a != b && !manifold) closed = false;
+      }
+    }
+    if (closed ? volume < 0.0 : area < 0.0)
+      for (int f : queue) orientation[size_t(f)] = int8_t(-orientation[size_t(f)]);
+  }
+  for (size_t f = 0; f < nt; ++f) {
+    if (twin[f] >= 0) {
+      const uint32_t a = indices[3 * f], b = indices[3 * f + 1];
+      orientation[f] = int8_t(edge_direction(indices, int(f), a, b) == edge_direction(indices, twin[f], a, b) ? orientation[size_t(twin[f])]
+                                                                                                             : -orientation[size_t(twin[f])]);
+    }
+    if (orientation[f] == 0) orientation[f] = 1;  // degenerate triangles (no edge of two corners)
+  }
 }
 
 void Mesh::fill_interaction(int prim, float b1, float b2, SurfaceInteraction& si) const {

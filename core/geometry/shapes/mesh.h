@@ -37,6 +37,13 @@ struct Mesh {
   std::vector<uint32_t> vertex_face_offsets, vertex_faces;  // CSR: triangles around each vertex
   std::vector<MeshEdge> edges;                               // built once: the topology is fixed
   std::vector<int> edge_more_faces;                          // non-manifold edges' third and later triangles
+  // Per triangle +1 or -1: the flips that make windings agree across two-triangle edges, each
+  // connected part turned so that a closed part encloses positive volume (its normals point out)
+  // and an open part keeps the winding of most of its area; a duplicate triangle gets its twin's
+  // orientation. Built once with the edges. Scans and artists' meshes have flipped triangles, and
+  // convexity and facing tests need normals that agree (rendering is two-sided and does not).
+  std::vector<int8_t> orientation;
+  size_t orientation_conflicts = 0;  // two-triangle edges left disagreeing (non-orientable parts)
   std::vector<float> triangle_areas;
   Distribution1D area_distribution;  // triangles by area
   float total_area = 0.0f;
@@ -50,6 +57,9 @@ struct Mesh {
     return glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
   }
 
+  // face_normal turned by `orientation`: agrees with the neighbours' across every manifold edge.
+  Vec3d oriented_normal(int f) const { return double(orientation[size_t(f)]) * face_normal(f); }
+
   // Calls f(face) for every distinct triangle at edge e.
   template <typename F>
   void for_each_edge_face(const MeshEdge& e, F&& f) const {
@@ -59,6 +69,7 @@ struct Mesh {
   }
 
   void update_derived();
+  void orient();  // fills `orientation` from the edges (called by update_derived)
   // Surface record at barycentrics (b1, b2) of triangle `prim`.
   void fill_interaction(int prim, float b1, float b2, SurfaceInteraction& si) const;
   PositionSample sample_position(const Vec2& u, float u_tri) const;

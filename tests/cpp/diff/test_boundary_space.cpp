@@ -180,6 +180,45 @@ TEST_CASE("mesh edges: a duplicated triangle counts once, in either winding") {
   }
 }
 
+TEST_CASE("mesh orientation: flipped and duplicated triangles turned to agree, closed parts outward") {
+  // A tetrahedron (corners 0-3) and, apart, an open strip of three triangles (4-8). Each in five
+  // windings: as given, each part turned inside out, one triangle flipped, a triangle duplicated in
+  // the other winding. Oriented normals must point out of the tetrahedron (away from its centroid)
+  // and agree across the strip's edges with the winding of most of its area.
+  const std::vector<std::array<uint32_t, 3>> tet = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}},
+                                             strip = {{4, 5, 6}, {5, 7, 6}, {6, 7, 8}};
+  auto flip = [](std::array<uint32_t, 3> f) { return std::array<uint32_t, 3>{f[0], f[2], f[1]}; };
+  for (int variant = 0; variant < 5; ++variant) {
+    CAPTURE(variant);
+    std::vector<std::array<uint32_t, 3>> faces;
+    for (const auto& f : tet) faces.push_back(variant == 1 ? flip(f) : f);
+    for (const auto& f : strip) faces.push_back(variant == 2 ? flip(f) : f);
+    if (variant == 3) faces[2] = flip(faces[2]), faces[5] = flip(faces[5]);
+    if (variant == 4) faces.push_back(flip(faces[1])), faces.push_back(flip(faces[6]));
+    nlohmann::json f = faces;
+    const std::string text = R"({"type": "scene", "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
+      "m": {"type": "mesh", "vertex_positions": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1],
+                                                 [3, 0, 0], [4, 0, 0], [3, 1, 0.2], [4, 1, 0], [3.5, 2, 0]], "faces": )" + f.dump() + "}}";
+    auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
+    const Mesh& m = scene->shapes[0].mesh();
+    REQUIRE(m.orientation.size() == faces.size());
+    const Vec3d centroid(0.25, 0.25, 0.25);
+    for (int t = 0; t < 4; ++t) CHECK(glm::dot(m.oriented_normal(t), Vec3d(m.vertex(m.indices[3 * t])) - centroid) > 0.0);
+    // The strip's given winding (variant 0) has normals up (+z); most of its area keeps its winding.
+    const double up = variant == 2 ? -1.0 : 1.0;
+    for (int t = 4; t < 7; ++t) CHECK(m.oriented_normal(t).z * up > 0.5);
+    if (variant == 4) {  // duplicates: the same oriented normal as their twins
+      CHECK(glm::length(m.oriented_normal(7) - m.oriented_normal(1)) < 1e-9);
+      CHECK(glm::length(m.oriented_normal(8) - m.oriented_normal(6)) < 1e-9);
+    }
+    // Convex edges of the tetrahedron are candidates whatever the winding.
+    int candidates = 0;
+    for (const MeshEdge& e : m.edges)
+      if (e.a < 4) candidates += edge_can_be_silhouette(m, e);
+    CHECK(candidates == 6);
+  }
+}
+
 TEST_CASE("boundary space: a non-manifold edge is a silhouette only where its triangles lie on one side") {
   // Three fins on the edge (0,0,0)-(0,0,1), their third vertices at 0, 30 and 60 degrees around it.
   // Along w the edge bounds visibility exactly when no two fins straddle the plane through the edge
