@@ -94,7 +94,6 @@ int edge_direction(const std::vector<uint32_t>& indices, int f, uint32_t a, uint
 void Mesh::orient() {
   const size_t nt = triangle_count();
   orientation.assign(nt, 0);
-  orientation_conflicts = 0;
   // Triangles across each two-triangle edge, and the duplicates' twins (the triangle the edges kept).
   std::vector<std::vector<std::pair<int, size_t>>> across(nt);  // (neighbour, edge)
   std::vector<int> twin(nt, -1);
@@ -153,8 +152,6 @@ void Mesh::orient() {
           if (orientation[size_t(g)] == 0) {
             orientation[size_t(g)] = want;
             queue.push_back(g);
-          } else if (orientation[size_t(g)] != want && f < g) {
-            ++orientation_conflicts;
           }
         }
         if (a != b && !manifold) closed = false;

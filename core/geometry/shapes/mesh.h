@@ -42,8 +42,7 @@ struct Mesh {
   // and an open part keeps the winding of most of its area; a duplicate triangle gets its twin's
   // orientation. Built once with the edges. Scans and artists' meshes have flipped triangles, and
   // convexity and facing tests need normals that agree (rendering is two-sided and does not).
-  std::vector<int8_t> orientation;
-  size_t orientation_conflicts = 0;  // two-triangle edges left disagreeing (non-orientable parts)
+  std::vector<int8_t> orientation;  // a non-orientable part keeps one seam where windings disagree
   std::vector<float> triangle_areas;
   Distribution1D area_distribution;  // triangles by area
   float total_area = 0.0f;
