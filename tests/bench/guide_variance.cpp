@@ -12,6 +12,8 @@
 // variance any grid of the default shape can reach, from the same samples. Markdown on stdout.
 // `--tail K` also lists the K samples that carry most of the default octree's (first seed) second
 // moment: where on which segment, towards which direction, f and the guide's density there.
+// The derivative image (x translation) is measured the same way: each guide's image variance per
+// sample, the run-to-run noise it predicts at the budget, and the floor no density can beat.
 #include <algorithm>
 #include <array>
 #include <cmath>
