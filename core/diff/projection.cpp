@@ -1,7 +1,6 @@
 #include "core/diff/projection.h"
 
 #include <algorithm>
-#include <array>
 #include <map>
 #include <tuple>
 #include "core/math/frame.h"
@@ -59,16 +58,9 @@ Projector::Projector(const Scene& scene, const BoundarySpace& space, MeshProject
       }
       return -1;
     };
-    t.canonical.resize(F);
-    std::map<std::array<uint32_t, 3>, int> first;
-    for (size_t f = 0; f < F; ++f) {
-      std::array<uint32_t, 3> corners{m.indices[3 * f], m.indices[3 * f + 1], m.indices[3 * f + 2]};
-      std::sort(corners.begin(), corners.end());
-      t.canonical[f] = first.try_emplace(corners, int(f)).first->second;
-    }
     t.normals.assign(m.vertex_count(), Vec3(0.0f));
     for (size_t f = 0; f < F; ++f) {
-      if (t.canonical[f] != int(f)) continue;  // a duplicate in the other winding would cancel its twin
+      if (m.distinct[f] != int(f)) continue;  // a duplicate in the other winding would cancel its twin
       const uint32_t* i = &m.indices[3 * f];
       const Vec3 c = float(m.orientation[f]) * glm::cross(m.vertex(i[1]) - m.vertex(i[0]), m.vertex(i[2]) - m.vertex(i[0]));
       if (std::isfinite(c.x + c.y + c.z))
@@ -222,7 +214,7 @@ bool Projector::jump(int shape, const Vec3& xa, int& f, Vec3& p) const {
   const float h = float(glm::length(q - Vec3d(p))) + 1e-3f * float(std::sqrt(std::max(g11, g22)));
   SurfaceInteraction si;
   if (!m_scene.intersect(Ray{Vec3(q) + h * nqf, -nqf, 0.0f, 2.0f * h}, si) || si.shape != shape) return false;
-  f = m_meshes.at(shape).canonical[size_t(si.prim)];
+  f = m.distinct[size_t(si.prim)];
   p = si.p;
   return true;
 }
@@ -255,7 +247,7 @@ std::optional<Projection> Projector::snap(int shape, int f, const Vec3& xa, cons
 }
 
 std::optional<Projection> Projector::project_mesh(const Vec3& xa, const SurfaceInteraction& hit, Pcg32& rng) const {
-  int f = m_meshes.at(hit.shape).canonical[size_t(hit.prim)], taken = 0;  // a duplicate has no neighbours of its own
+  int f = m_scene.shapes[hit.shape].mesh().distinct[size_t(hit.prim)], taken = 0;  // a duplicate has no neighbours of its own
   Vec3 p = hit.p;
   int seg = -1;
   if (m_mode != MeshProjection::Jump) seg = walk(hit.shape, xa, hit.p, f, kWalkSteps, rng, taken);

@@ -53,7 +53,6 @@ class Projector {
     std::vector<int> neighbour;   // 3 per triangle: the triangle across edge k (k = corner k -> k+1), -1 if none or non-manifold
     std::vector<int> segment;     // 3 per triangle: boundary-space segment of that edge, -1 if not in the space
     std::vector<Vec3> normals;    // area-weighted vertex normals (JUMP's interpolated normal; flat meshes have none)
-    std::vector<int> canonical;   // per triangle: the first with the same corners (Mesh::edges counts duplicates once)
   };
   const Scene& m_scene;
   const BoundarySpace& m_space;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cstring>
+#include <map>
 #include <unordered_map>
 #include "core/math/warp.h"
 
@@ -18,18 +19,21 @@ void Mesh::update_derived() {
     std::vector<uint32_t> fill(vertex_face_offsets.begin(), vertex_face_offsets.end() - 1);
     for (size_t f = 0; f < nt; ++f)
       for (int k = 0; k < 3; ++k) vertex_faces[fill[indices[3 * f + k]]++] = uint32_t(f);
+    // Duplicated triangles (the same corners in either winding): the first one stands for all.
+    distinct.resize(nt);
+    std::map<std::array<uint32_t, 3>, int> first;
+    for (size_t f = 0; f < nt; ++f) {
+      std::array<uint32_t, 3> corners{indices[3 * f], indices[3 * f + 1], indices[3 * f + 2]};
+      std::sort(corners.begin(), corners.end());
+      distinct[f] = first.try_emplace(corners, int(f)).first->second;
+    }
     // Undirected edges: two triangles around a vertex share an edge when they share another vertex.
-    auto sorted_corners = [&](size_t f) {
-      std::array<uint32_t, 3> v{indices[3 * f], indices[3 * f + 1], indices[3 * f + 2]};
-      std::sort(v.begin(), v.end());
-      return v;
-    };
     std::unordered_map<uint64_t, size_t> slot;
     std::unordered_map<size_t, std::vector<int>> more_of;  // non-manifold edges' later triangles, by edge
     edges.clear();
     edge_more_faces.clear();
     for (size_t f = 0; f < nt; ++f)
-      for (int k = 0; k < 3; ++k) {
+      for (int k = 0; k < 3 && distinct[f] == int(f); ++k) {
         uint32_t a = indices[3 * f + k], b = indices[3 * f + (k + 1) % 3];
         if (a > b) std::swap(a, b);
         if (a == b) continue;
@@ -39,11 +43,6 @@ void Mesh::update_derived() {
           continue;
         }
         MeshEdge& e = edges[it->second];
-        const auto corners = sorted_corners(f);
-        bool duplicate = corners == sorted_corners(size_t(e.face0)) || (e.face1 >= 0 && corners == sorted_corners(size_t(e.face1)));
-        if (e.face_count > 2)
-          for (int g : more_of[it->second]) duplicate = duplicate || corners == sorted_corners(size_t(g));
-        if (duplicate) continue;
         if (e.face_count == 1) e.face1 = int(f);
         else more_of[it->second].push_back(int(f));
         e.face_count++;
@@ -94,39 +93,18 @@ int edge_direction(const std::vector<uint32_t>& indices, int f, uint32_t a, uint
 void Mesh::orient() {
   const size_t nt = triangle_count();
   orientation.assign(nt, 0);
-  // Triangles across each two-triangle edge, and the duplicates' twins (the triangle the edges kept).
-  std::vector<std::vector<std::pair<int, size_t>>> across(nt);  // (neighbour, edge)
-  std::vector<int> twin(nt, -1);
-  std::vector<char> counted(nt, 0);
+  std::vector<std::vector<std::pair<int, size_t>>> across(nt);  // triangles across two-triangle edges: (neighbour, edge)
   for (size_t i = 0; i < edges.size(); ++i) {
     const MeshEdge& e = edges[i];
-    for_each_edge_face(e, [&](int f) { counted[size_t(f)] = 1; });
     if (e.face_count != 2) continue;
     across[size_t(e.face0)].push_back({e.face1, i});
     across[size_t(e.face1)].push_back({e.face0, i});
-  }
-  {
-    std::unordered_map<uint64_t, std::vector<int>> by_corner;  // counted triangles by their lowest corner
-    auto sorted = [&](size_t f) {
-      std::array<uint32_t, 3> v{indices[3 * f], indices[3 * f + 1], indices[3 * f + 2]};
-      std::sort(v.begin(), v.end());
-      return v;
-    };
-    for (size_t f = 0; f < nt; ++f)
-      if (counted[f]) by_corner[sorted(f)[0]].push_back(int(f));
-    for (size_t f = 0; f < nt; ++f) {
-      if (counted[f]) continue;
-      auto it = by_corner.find(sorted(f)[0]);
-      if (it == by_corner.end()) continue;
-      for (int g : it->second)
-        if (sorted(size_t(g)) == sorted(f)) twin[f] = g;
-    }
   }
   // Breadth-first over each connected part: a neighbour that runs along the shared edge the same
   // way as its triangle is flipped relative to it.
   std::vector<int> queue;
   for (size_t seed = 0; seed < nt; ++seed) {
-    if (orientation[seed] != 0 || !counted[seed]) continue;
+    if (orientation[seed] != 0 || distinct[seed] != int(seed)) continue;
     queue.assign(1, int(seed));
     orientation[seed] = 1;
     double volume = 0.0, area = 0.0;
@@ -161,12 +139,12 @@ void Mesh::orient() {
       for (int f : queue) orientation[size_t(f)] = int8_t(-orientation[size_t(f)]);
   }
   for (size_t f = 0; f < nt; ++f) {
-    if (twin[f] >= 0) {
+    const int twin = distinct[f];
+    if (twin != int(f)) {  // a duplicate: the twin's orientation, turned if wound the other way
       const uint32_t a = indices[3 * f], b = indices[3 * f + 1];
-      orientation[f] = int8_t(edge_direction(indices, int(f), a, b) == edge_direction(indices, twin[f], a, b) ? orientation[size_t(twin[f])]
-                                                                                                             : -orientation[size_t(twin[f])]);
+      orientation[f] = int8_t(edge_direction(indices, int(f), a, b) == edge_direction(indices, twin, a, b) ? orientation[size_t(twin)]
+                                                                                                          : -orientation[size_t(twin)]);
     }
-    if (orientation[f] == 0) orientation[f] = 1;  // degenerate triangles (no edge of two corners)
   }
 }
 

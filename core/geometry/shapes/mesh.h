@@ -35,7 +35,8 @@ struct Mesh {
   // Derived state, recomputed by update_derived() after positions change.
   std::vector<Vec3> vertex_normals;
   std::vector<uint32_t> vertex_face_offsets, vertex_faces;  // CSR: triangles around each vertex
-  std::vector<MeshEdge> edges;                               // built once: the topology is fixed
+  std::vector<int> distinct;                                 // per triangle: itself, or the first with the same corners
+  std::vector<MeshEdge> edges;                               // built once: the topology is fixed (duplicates left out)
   std::vector<int> edge_more_faces;                          // non-manifold edges' third and later triangles
   // Per triangle +1 or -1: the flips that make windings agree across two-triangle edges, each
   // connected part turned so that a closed part encloses positive volume (its normals point out)
