@@ -33,7 +33,7 @@ using namespace limn;
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D] [--direction-octaves K] [--leaf-samples N] [--octree-depth D]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D] [--direction-octaves K] [--leaf-samples N] [--octree-depth D] [--guiding-seeds N] [--octree-training N]\n", argv[0]);
     return 2;
   }
   int seeds = 4, qspp = 2048, spp = 1024, tail = 0;
@@ -49,6 +49,8 @@ int main(int argc, char** argv) {
     else if (k == "--direction-octaves") tested.direction_octaves = std::stoi(argv[a + 1]);
     else if (k == "--leaf-samples") tested.octree.leaf_samples = std::stoi(argv[a + 1]);
     else if (k == "--octree-depth") tested.octree.max_depth = std::stoi(argv[a + 1]);
+    else if (k == "--guiding-seeds") tested.guiding_seeds = std::stoi(argv[a + 1]);
+    else if (k == "--octree-training") tested.octree_training = std::stoi(argv[a + 1]);
     else {
       std::fprintf(stderr, "unknown option %s\n", argv[a]);
       return 2;
@@ -68,6 +70,8 @@ int main(int argc, char** argv) {
         o.direction_octaves = tested.direction_octaves;
         o.octree.leaf_samples = tested.octree.leaf_samples;
         o.octree.max_depth = tested.octree.max_depth;
+        o.guiding_seeds = tested.guiding_seeds;
+        o.octree_training = tested.octree_training;
       }
       o.guiding = guiding;
       o.direction_mix = direction_mix;
