@@ -9,6 +9,12 @@ import numpy as np
 from .scene import Scene
 
 
+# Part of every cached reference's key: the key holds the scene and the settings, not the code, so
+# bump this whenever a change alters primal images (not only their derivatives), or the cache
+# serves references of the old renderer.
+PRIMAL_REVISION = 1
+
+
 def default_cache_dir() -> str:
     return os.environ.get("LIMN_FD_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "limn", "fd"))
 
@@ -22,7 +28,8 @@ def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache:
     (docs/reports/projective/reference.md). ``tangents`` maps parameter names to arrays shaped like
     the parameters. The parameters are restored afterwards. Results are cached on disk (``cache``:
     True for the default folder, $LIMN_FD_CACHE or ~/.cache/limn/fd; a path; or False), keyed by
-    the scene's source, every parameter value, the tangents and the settings. ``max_depth`` as in
+    the scene's source, every parameter value, each mesh's triangles, the tangents, the settings and
+    ``PRIMAL_REVISION``. ``max_depth`` as in
     :meth:`Scene.render`."""
     if not eps > 0:
         raise ValueError(f"eps must be > 0 (got {eps})")
@@ -36,10 +43,12 @@ def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache:
 
     path = None
     if cache:
-        digest = hashlib.sha256(scene._fingerprint)
+        digest = hashlib.sha256(scene._fingerprint + b"\0primal revision %d" % PRIMAL_REVISION)
         for name in sorted(scene.params):
             digest.update(name.encode())
             digest.update(np.ascontiguousarray(scene.params[name]).tobytes())
+            if name.endswith(".vertex_positions"):  # a mesh's triangles come from its file, not the scene's
+                digest.update(np.ascontiguousarray(scene.faces(name[:-len(".vertex_positions")])).tobytes())
         for name in sorted(base):
             digest.update(b"tangent:" + name.encode())
             digest.update(base[name][1].tobytes())

@@ -264,6 +264,40 @@ def test_fd_cache(tmp_path):
     np.testing.assert_array_equal(scene.params["floor.reflectance"], np.float32([0.1, 0.1, 0.1]))  # restored
 
 
+def test_fd_cache_key_holds_the_mesh_files_triangles_and_the_primal_revision(tmp_path, monkeypatch):
+    """A scene file names its mesh file, so the scene's text does not show triangles changed there
+    (same vertices); nor does it show a renderer whose primal images changed (PRIMAL_REVISION).
+    Neither may be served the old reference."""
+    import importlib
+    import json
+    fd_module = importlib.import_module("limn.fd")  # the attribute limn.fd is the function
+    quad = "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n"
+    (tmp_path / "quad.obj").write_text(quad + "f 1 2 3\nf 1 3 4\n")
+    scene_file = tmp_path / "scene.json"
+    scene_file.write_text(json.dumps({
+        "type": "scene", "integrator": {"type": "direct"},
+        "sensor": camera((0, -0.5, 3), (0, 0, 0), width=8, height=8, spp=4),
+        "quad": {"type": "obj", "filename": "quad.obj", "bsdf": DIFFUSE},
+        "lamp": {"type": "rectangle", "to_world": [{"rotate": {"axis": [1, 0, 0], "angle": 180}}, {"translate": [0, 0, 2]}],
+                 "emitter": {"type": "area", "radiance": 5.0}}}))
+    cache = tmp_path / "cache"
+
+    def reference():
+        scene = limn.load(str(scene_file))
+        return limn.fd(scene, {"quad.reflectance": np.ones(3, np.float32)}, eps=1e-2, spp=4, cache=str(cache))
+
+    reference()
+    assert len(list(cache.iterdir())) == 1
+    reference()
+    assert len(list(cache.iterdir())) == 1  # the same scene, code and settings: served from the cache
+    (tmp_path / "quad.obj").write_text(quad + "f 1 2 3\nf 2 3 4\n")  # the vertices as before, one triangle moved
+    reference()
+    assert len(list(cache.iterdir())) == 2
+    monkeypatch.setattr(fd_module, "PRIMAL_REVISION", fd_module.PRIMAL_REVISION + 1)
+    reference()
+    assert len(list(cache.iterdir())) == 3
+
+
 def test_translation_parameter_moves_geometry_and_differentiates_as_rigid_motion():
     d = floor_scene(DIFFUSE)
     d["ball"] = {"type": "sphere", "center": [0.5, 0.5, 0.6], "radius": 0.3}
