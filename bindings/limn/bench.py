@@ -27,6 +27,7 @@ METHODS = {
     "paper_projective_grid": {"guiding": "grid", "projective": True, "grid_octaves": 0, "direction_mix": 0.0},
     "octree_untrained": {"guiding": "octree", "octree_training": 0},   # the paper's octree: projections only
     "octree": {"guiding": "octree"},                                  # with the training round
+    "octree_refined": {"guiding": "octree", "octree_refine_rounds": 2},  # and two rounds splitting heavy leaves
 }
 
 

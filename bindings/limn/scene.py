@@ -4,6 +4,7 @@ from __future__ import annotations
 import collections.abc
 import hashlib
 import json
+import math
 import os
 import warnings
 from typing import Callable, Iterator
@@ -148,6 +149,10 @@ class Scene:
                 raise ValueError(f"{name} must be in [0, 8] (got {opts[name]})")
         if int(opts["octree_training"]) < 0:
             raise ValueError(f"octree_training must be >= 0 (got {opts['octree_training']})")
+        if not (0 <= int(opts["octree_refine_rounds"]) <= 8):
+            raise ValueError(f"octree_refine_rounds must be in [0, 8] (got {opts['octree_refine_rounds']})")
+        if not (float(opts["octree_refine_factor"]) > 0.0 and math.isfinite(float(opts["octree_refine_factor"]))):
+            raise ValueError(f"octree_refine_factor must be > 0 (got {opts['octree_refine_factor']})")
         for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples", "direction_resolution"):
             if int(opts[name]) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
@@ -204,6 +209,10 @@ class Scene:
           mixture under-samples the integrand) join the projections as points the octree splits at, each
           adding its value over one finest cell to its leaf's mass (a training round in the manner of
           practical path guiding, not in the paper; 0: projections only, as in the paper).
+          ``octree_refine_rounds`` (default 0, off) rounds then split every leaf of more than
+          ``octree_refine_factor`` (default 1) times the mean leaf mass into 8 and estimate the new
+          leaves' masses from ``octree_leaf_samples`` uniform points each (resolution where the mass
+          is; not in the paper; docs/reports/projective/README.md, twelfth pass, has its cost and gain).
         - ``direction_mix`` (projective grid and octree, default 0.2): the share of the projections'
           direction histogram in the mixture (the octree's and the grid's shares above are of the rest),
           ``direction_resolution`` squared cells (default 256, at most 4096) over the sample space's second

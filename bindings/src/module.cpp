@@ -116,6 +116,8 @@ const std::vector<DiffOptionField>& diff_option_fields() {
       field<int>("octree_max_depth", [](DiffOptions& o) -> int& { return o.octree.max_depth; }),
       field<int>("octree_leaf_samples", [](DiffOptions& o) -> int& { return o.octree.leaf_samples; }),
       field<size_t>("octree_max_leaves", [](DiffOptions& o) -> size_t& { return o.octree.max_leaves; }),
+      field<int>("octree_refine_rounds", [](DiffOptions& o) -> int& { return o.octree.refine_rounds; }),
+      field<float>("octree_refine_factor", [](DiffOptions& o) -> float& { return o.octree.refine_factor; }),
       field<float>("octree_grid_mix", [](DiffOptions& o) -> float& { return o.octree_grid_mix; }),
       field<int>("octree_training", [](DiffOptions& o) -> int& { return o.octree_training; }),
       field<float>("direction_mix", [](DiffOptions& o) -> float& { return o.direction_mix; }),

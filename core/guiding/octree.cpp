@@ -3,6 +3,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <cmath>
 #include <deque>
 #include <stdexcept>
 #include <string>
@@ -17,6 +18,8 @@ void check_options(const OctreeOptions& opt) {
   if (opt.max_depth < 0 || opt.max_depth > 12) throw std::invalid_argument("octree guiding: max_depth must be in [0, 12] (got " + std::to_string(opt.max_depth) + ")");
   if (opt.leaf_samples < 1) throw std::invalid_argument("octree guiding: leaf_samples must be >= 1 (got " + std::to_string(opt.leaf_samples) + ")");
   if (opt.max_leaves < size_t(opt.slices)) throw std::invalid_argument("octree guiding: max_leaves must be >= slices");
+  if (opt.refine_rounds < 0 || opt.refine_rounds > 8) throw std::invalid_argument("octree guiding: refine_rounds must be in [0, 8] (got " + std::to_string(opt.refine_rounds) + ")");
+  if (!(opt.refine_factor > 0.0f) || !std::isfinite(opt.refine_factor)) throw std::invalid_argument("octree guiding: refine_factor must be > 0 (got " + std::to_string(opt.refine_factor) + ")");
 }
 
 bool inside_unit_cube(const Vec3& p) { return p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f && p.z >= 0.0f && p.z < 1.0f; }
@@ -73,7 +76,67 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
       }
     });
   });
+  for (int round = 0; round < opt.refine_rounds; ++round) refine(mass, integrand, seed + 1000003ULL * uint64_t(round + 1), threads);
   finish(mass);
+}
+
+double BoundaryOctree::uniform_mass(const Leaf& leaf, const std::function<float(const Vec3&)>& integrand, uint64_t seed, size_t index) const {
+  Pcg32 rng = pixel_rng(mix_bits(seed ^ 0x6f63747265650aULL), index);
+  double sum = 0.0;
+  for (int s = 0; s < m_opt.leaf_samples; ++s) {
+    const Vec3 p = leaf.lo + leaf.size * Vec3(rng.next_float(), rng.next_float(), rng.next_float());
+    const float f = integrand(glm::min(p, Vec3(1.0f - 1e-7f)));
+    if (std::isfinite(f) && f > 0.0f) sum += f;
+  }
+  return sum / m_opt.leaf_samples * double(leaf.size.x) * leaf.size.y * leaf.size.z;
+}
+
+void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float(const Vec3&)>& integrand, uint64_t seed, int threads) {
+  double total = 0.0;
+  for (double m : mass) total += m;
+  if (!(total > 0.0)) return;
+  const double threshold = m_opt.refine_factor * total / double(m_leaves.size());
+  std::vector<int> leaf_node(m_leaves.size(), -1);
+  for (size_t k = 0; k < m_nodes.size(); ++k)
+    if (m_nodes[k].child < 0) leaf_node[size_t(m_nodes[k].leaf)] = int(k);
+  std::vector<size_t> fresh;     // leaves whose mass is to be estimated
+  std::vector<double> inherited;  // an eighth of each fresh leaf's parent's mass
+  const size_t old_count = m_leaves.size();
+  for (size_t l = 0; l < old_count; ++l) {
+    const int depth = int(std::lround(-std::log2(double(m_leaves[l].size.y))));
+    if (!(mass[l] > threshold) || depth >= m_opt.max_depth) continue;
+    if (m_leaves.size() + 7 > m_opt.max_leaves) {
+      m_coarsened = true;
+      break;
+    }
+    const Leaf parent = m_leaves[l];
+    const double parent_mass = mass[l];
+    const int node = leaf_node[l], first = int(m_nodes.size());
+    m_nodes[size_t(node)].child = first;
+    m_nodes[size_t(node)].leaf = -1;
+    m_nodes.resize(m_nodes.size() + 8);
+    const Vec3 half = 0.5f * parent.size, mid = parent.lo + half;
+    for (int c = 0; c < 8; ++c) {
+      const Leaf child{Vec3(c & 1 ? mid.x : parent.lo.x, c & 2 ? mid.y : parent.lo.y, c & 4 ? mid.z : parent.lo.z), half};
+      const size_t index = c == 0 ? l : m_leaves.size();
+      if (c == 0) m_leaves[l] = child;
+      else m_leaves.push_back(child);
+      m_nodes[size_t(first + c)].leaf = int(index);
+      fresh.push_back(index);
+      inherited.push_back(parent_mass / 8.0);
+    }
+    m_deepest = std::max(m_deepest, depth + 1);
+  }
+  mass.resize(m_leaves.size(), 0.0);
+  m_refined += fresh.size();
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    // Half the parent's mass spread evenly: a child whose uniform points all missed the parent's
+    // peak keeps half the parent's density, so no part of a heavy leaf becomes a heavy tail.
+    tbb::parallel_for(size_t(0), fresh.size(), [&](size_t i) {
+      mass[fresh[i]] = 0.5 * uniform_mass(m_leaves[fresh[i]], integrand, seed, fresh[i]) + 0.5 * inherited[i];
+    });
+  });
 }
 
 std::vector<std::vector<uint32_t>> BoundaryOctree::partition(const std::vector<Vec3>& points, const std::vector<uint32_t>& splitting) {
@@ -248,6 +311,7 @@ std::string BoundaryOctree::describe() const {
          (m_valued ? " points of non-zero value, " : " points, ") + std::to_string(m_leaves.size()) + " leaves (" +
          std::to_string(m_empty) + " empty), depth <= " + std::to_string(m_opt.max_depth) + ", " +
          std::to_string(m_opt.leaf_samples) + " uniform samples per leaf" +
+         (m_refined > 0 ? ", " + std::to_string(m_refined) + " leaves from " + std::to_string(m_opt.refine_rounds) + " refinement rounds" : "") +
          (m_coarsened ? ", COARSENED at the leaf budget (max_leaves " + std::to_string(m_opt.max_leaves) + ")" : "");
 }
 

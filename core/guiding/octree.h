@@ -35,6 +35,11 @@ struct OctreeOptions {
   int leaf_samples = 8;      // the paper has 32; at 8 the leaf masses already take most of the set-up
   size_t max_leaves = 1u << 20;
   float defensive = 0.1f;
+  // Rounds that split every leaf of more than refine_factor x the mean leaf mass into 8 (up to
+  // max_depth) and estimate the new leaves' masses from leaf_samples uniform points each: the
+  // partition stops at one point per leaf, which leaves the peaks inside the heavy leaves coarse.
+  int refine_rounds = 0;
+  float refine_factor = 1.0f;
 };
 
 class BoundaryOctree : public BoundaryGuide {
@@ -73,6 +78,9 @@ class BoundaryOctree : public BoundaryGuide {
   std::vector<std::vector<uint32_t>> partition(const std::vector<Vec3>& points, const std::vector<uint32_t>& splitting);
   // Leaf probabilities from masses (with the defensive share) and the first coordinate's marginal.
   void finish(const std::vector<double>& mass);
+  // Splits leaves of large mass into 8 and estimates the new leaves' masses from uniform points.
+  void refine(std::vector<double>& mass, const std::function<float(const Vec3&)>& integrand, uint64_t seed, int threads);
+  double uniform_mass(const Leaf& leaf, const std::function<float(const Vec3&)>& integrand, uint64_t seed, size_t index) const;
 
   OctreeOptions m_opt;
   std::vector<Node> m_nodes;       // the first `slices` nodes are the slab roots
@@ -86,6 +94,7 @@ class BoundaryOctree : public BoundaryGuide {
   bool m_valued = false;   // built with values (only non-zero ones split)
   bool m_coarsened = false;
   int m_deepest = 0;
+  size_t m_refined = 0;  // leaves made by refine()
 };
 
 }  // namespace limn

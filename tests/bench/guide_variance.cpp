@@ -16,6 +16,7 @@
 // sample, the run-to-run noise it predicts at the budget, and the floor no density can beat.
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -48,6 +49,8 @@ int main(int argc, char** argv) {
     else if (k == "--direction-resolution") tested.direction_resolution = std::stoi(argv[a + 1]);
     else if (k == "--direction-octaves") tested.direction_octaves = std::stoi(argv[a + 1]);
     else if (k == "--leaf-samples") tested.octree.leaf_samples = std::stoi(argv[a + 1]);
+    else if (k == "--refine-rounds") tested.octree.refine_rounds = std::stoi(argv[a + 1]);
+    else if (k == "--refine-factor") tested.octree.refine_factor = std::stof(argv[a + 1]);
     else if (k == "--octree-depth") tested.octree.max_depth = std::stoi(argv[a + 1]);
     else if (k == "--guiding-seeds") tested.guiding_seeds = std::stoi(argv[a + 1]);
     else if (k == "--octree-training") tested.octree_training = std::stoi(argv[a + 1]);
@@ -70,6 +73,8 @@ int main(int argc, char** argv) {
         o.direction_octaves = tested.direction_octaves;
         o.octree.leaf_samples = tested.octree.leaf_samples;
         o.octree.max_depth = tested.octree.max_depth;
+        o.octree.refine_rounds = tested.octree.refine_rounds;
+        o.octree.refine_factor = tested.octree.refine_factor;
         o.guiding_seeds = tested.guiding_seeds;
         o.octree_training = tested.octree_training;
       }
@@ -191,7 +196,10 @@ int main(int argc, char** argv) {
         std::string cells, image_cells;
         double sum = 0.0, image_sum = 0.0;
         for (int t = 0; t < seeds; ++t) {
+          const auto built_at = std::chrono::steady_clock::now();
           const auto p = build_boundary_guide(*scene, ib, options(guiding, mix, 7 + 1000 * uint64_t(t), true));
+          std::fprintf(stderr, "%s (direction share %.2f, seed %d): built in %.2f s: %s\n", guiding.c_str(), mix, t,
+                       std::chrono::duration<double>(std::chrono::steady_clock::now() - built_at).count(), p->describe().c_str());
           std::vector<double> part(M), image_part(M);
           tbb::parallel_for(size_t(0), M, [&](size_t i) {
             const float pu = p->pdf(u[i]);
