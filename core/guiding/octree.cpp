@@ -54,15 +54,9 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, m_leaves.size(), 64), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t l = r.begin(); l != r.end(); ++l) {
-        Pcg32 rng = pixel_rng(mix_bits(seed ^ 0x6f63747265650aULL), l);
         const Leaf& leaf = m_leaves[l];
-        double sum = 0.0;
+        double sum = uniform_sum(leaf, integrand, seed, l);
         int count = opt.leaf_samples;
-        for (int s = 0; s < opt.leaf_samples; ++s) {
-          const Vec3 p = leaf.lo + leaf.size * Vec3(rng.next_float(), rng.next_float(), rng.next_float());
-          const float f = integrand(glm::min(p, Vec3(1.0f - 1e-7f)));
-          if (std::isfinite(f) && f > 0.0f) sum += f;
-        }
         double found = 0.0;  // the trained points' values, each over one finest cell
         for (uint32_t i : leaf_points[l]) {
           if (i >= points.size()) {
@@ -80,7 +74,7 @@ BoundaryOctree::BoundaryOctree(const std::vector<Vec3>& points, const OctreeOpti
   finish(mass);
 }
 
-double BoundaryOctree::uniform_mass(const Leaf& leaf, const std::function<float(const Vec3&)>& integrand, uint64_t seed, size_t index) const {
+double BoundaryOctree::uniform_sum(const Leaf& leaf, const std::function<float(const Vec3&)>& integrand, uint64_t seed, size_t index) const {
   Pcg32 rng = pixel_rng(mix_bits(seed ^ 0x6f63747265650aULL), index);
   double sum = 0.0;
   for (int s = 0; s < m_opt.leaf_samples; ++s) {
@@ -88,7 +82,7 @@ double BoundaryOctree::uniform_mass(const Leaf& leaf, const std::function<float(
     const float f = integrand(glm::min(p, Vec3(1.0f - 1e-7f)));
     if (std::isfinite(f) && f > 0.0f) sum += f;
   }
-  return sum / m_opt.leaf_samples * double(leaf.size.x) * leaf.size.y * leaf.size.z;
+  return sum;
 }
 
 void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float(const Vec3&)>& integrand, uint64_t seed, int threads) {
@@ -134,7 +128,9 @@ void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float
     // Half the parent's mass spread evenly: a child whose uniform points all missed the parent's
     // peak keeps half the parent's density, so no part of a heavy leaf becomes a heavy tail.
     tbb::parallel_for(size_t(0), fresh.size(), [&](size_t i) {
-      mass[fresh[i]] = 0.5 * uniform_mass(m_leaves[fresh[i]], integrand, seed, fresh[i]) + 0.5 * inherited[i];
+      const Leaf& leaf = m_leaves[fresh[i]];
+      const double own = uniform_sum(leaf, integrand, seed, fresh[i]) / m_opt.leaf_samples * double(leaf.size.x) * leaf.size.y * leaf.size.z;
+      mass[fresh[i]] = 0.5 * own + 0.5 * inherited[i];
     });
   });
 }

@@ -80,7 +80,8 @@ class BoundaryOctree : public BoundaryGuide {
   void finish(const std::vector<double>& mass);
   // Splits leaves of large mass into 8 and estimates the new leaves' masses from uniform points.
   void refine(std::vector<double>& mass, const std::function<float(const Vec3&)>& integrand, uint64_t seed, int threads);
-  double uniform_mass(const Leaf& leaf, const std::function<float(const Vec3&)>& integrand, uint64_t seed, size_t index) const;
+  // Sum of the integrand at leaf_samples uniform points in the leaf (the stream: seed and index).
+  double uniform_sum(const Leaf& leaf, const std::function<float(const Vec3&)>& integrand, uint64_t seed, size_t index) const;
 
   OctreeOptions m_opt;
   std::vector<Node> m_nodes;       // the first `slices` nodes are the slab roots

@@ -20,7 +20,7 @@ import warnings
 import numpy as np
 
 import limn
-from limn.bench import default_tangent
+from limn.bench import default_tangent, guide_seconds
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PARAMS = {"sphere": "shape.center", "torus": "shape.vertex_positions", "cube_hole": "shape.vertex_positions",
@@ -63,8 +63,8 @@ def main() -> None:
                     st = scene.last_stats
                     images[r].append(img.astype(np.float64))
                     seconds[r].append(st["seconds"])
+                    setup[r].append(guide_seconds(st["summary"]))
                     line = next((l for l in st["summary"] if "built in " in l), "")
-                    setup[r].append(float(line.split("built in ")[1].split(" s")[0]) if line else 0.0)
                     if "refinement rounds" in line:
                         refined[r] = line.split(" leaves from ")[0].rsplit(", ", 1)[1]
             noise, time = {}, {}

@@ -404,7 +404,7 @@ TEST_CASE("guides keep their numbers' precision: points inside a cold cell are n
 }
 
 // A narrow ridge along the first axis, as an edge's specular peak over the directions.
-float ridge(const Vec3& u) {
+static float ridge(const Vec3& u) {
   const float dy = u.y - 0.5f - 0.2f * u.x, dz = u.z - 0.3f;
   return std::exp(-(dy * dy + dz * dz) / (2.0f * 0.01f * 0.01f));
 }
