@@ -26,8 +26,8 @@ METHODS = {
     # The paper's projective grid: one grid, no direction histogram (section 5.1.1).
     "paper_projective_grid": {"guiding": "grid", "projective": True, "grid_octaves": 0, "direction_mix": 0.0},
     "octree_untrained": {"guiding": "octree", "octree_training": 0},   # the paper's octree: projections only
-    "octree": {"guiding": "octree"},                                  # with the training round
-    "octree_refined": {"guiding": "octree", "octree_refine_rounds": 2},  # and two rounds splitting heavy leaves
+    "octree_unrefined": {"guiding": "octree", "octree_refine_rounds": 0},  # with the training round
+    "octree": {"guiding": "octree"},              # and two rounds splitting the heavy leaves (the default)
 }
 
 

@@ -209,10 +209,10 @@ class Scene:
           mixture under-samples the integrand) join the projections as points the octree splits at, each
           adding its value over one finest cell to its leaf's mass (a training round in the manner of
           practical path guiding, not in the paper; 0: projections only, as in the paper).
-          ``octree_refine_rounds`` (default 0, off) rounds then split every leaf of more than
+          ``octree_refine_rounds`` (default 2; 0: off, as in the paper) rounds then split every leaf of more than
           ``octree_refine_factor`` (default 1) times the mean leaf mass into 8 and estimate the new
           leaves' masses from ``octree_leaf_samples`` uniform points each (resolution where the mass
-          is; not in the paper; docs/reports/projective/README.md, twelfth pass, has its cost and gain).
+          is; not in the paper; docs/reports/projective/octree_refinement.md has its cost and gain).
         - ``direction_mix`` (projective grid and octree, default 0.2): the share of the projections'
           direction histogram in the mixture (the octree's and the grid's shares above are of the rest),
           ``direction_resolution`` squared cells (default 256, at most 4096) over the sample space's second
