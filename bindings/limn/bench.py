@@ -25,7 +25,7 @@ METHODS = {
     "projective_grid": {"guiding": "grid", "projective": True},
     # The paper's projective grid: one grid, no direction histogram (section 5.1.1).
     "paper_projective_grid": {"guiding": "grid", "projective": True, "grid_octaves": 0, "direction_mix": 0.0},
-    "octree_untrained": {"guiding": "octree", "octree_training": 0},   # the paper's octree: projections only
+    "octree_untrained": {"guiding": "octree", "octree_training": 0, "octree_refine_rounds": 0},  # the paper's octree
     "octree_unrefined": {"guiding": "octree", "octree_refine_rounds": 0},  # with the training round
     "octree": {"guiding": "octree"},              # and two rounds splitting the heavy leaves (the default)
 }
@@ -109,7 +109,8 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
              "random points per cell; `projective_grid` and `octree` filled from projected seeds (`paper_projective_grid`: "
              "one grid and no direction histogram, as in the paper; `octree_untrained`: "
-             "from the projections alone, as in the paper; `octree`: with the training round's points too). "
+             "from the projections alone, as in the paper; `octree_unrefined`: with the training round's points too; "
+             "`octree`: and two refinement rounds, the default). "
              "The indirect term's boundary points are stratified (`boundary_sampler`, the default) unless the method "
              "says `:independent`.", "",
              "Run-to-run noise: the pixel RMS of the standard deviation over the runs, relative to the reference's RMS "

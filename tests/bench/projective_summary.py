@@ -19,11 +19,13 @@ SCENES = ["sphere", "torus", "cube_hole", "bunny"]
 STEPS = [("projective grid over the baseline grid 1x", "grid", "projective_grid"),
          ("projective grid over the baseline grid 10x", "grid10x", "projective_grid"),
          ("octree, projections only, over the projective grid", "projective_grid", "octree_untrained"),
-         ("octree with the training round over the projective grid", "projective_grid", "octree"),
-         ("octree with the training round over the baseline grid 1x", "grid", "octree"),
+         ("octree with the training round over the projective grid", "projective_grid", "octree_unrefined"),
+         ("octree (training, refinement: the default) over the projective grid", "projective_grid", "octree"),
+         ("octree: refinement rounds over none", "octree_unrefined", "octree"),
+         ("octree (the default) over the baseline grid 1x", "grid", "octree"),
          # The paper's grid (one grid, no direction histogram): its two steps, as the paper took them.
          ("the paper's projective grid over the baseline grid 1x", "grid", "paper_projective_grid"),
-         ("octree with the training round over the paper's projective grid", "paper_projective_grid", "octree"),
+         ("octree (the default) over the paper's projective grid", "paper_projective_grid", "octree"),
          # Stratified boundary points (the default) against independent ones (`method:independent`).
          ("baseline grid: stratified over independent points", "grid:independent", "grid"),
          ("projective grid: stratified over independent points", "projective_grid:independent", "projective_grid"),
