@@ -11,8 +11,8 @@ from .scene import Scene
 
 # Part of every cached reference's key: the key holds the scene and the settings, not the code, so
 # bump this whenever a change alters primal images (not only their derivatives), or the cache
-# serves references of the old renderer.
-PRIMAL_REVISION = 1
+# serves references of the old renderer. 2: a duplicated triangle counts once in smooth normals.
+PRIMAL_REVISION = 2
 
 
 def default_cache_dir() -> str:
@@ -43,18 +43,9 @@ def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache:
 
     path = None
     if cache:
-        digest = hashlib.sha256(scene._fingerprint + b"\0primal revision %d" % PRIMAL_REVISION)
-        for name in sorted(scene.params):
-            digest.update(name.encode())
-            digest.update(np.ascontiguousarray(scene.params[name]).tobytes())
-            if name.endswith(".vertex_positions"):  # a mesh's triangles come from its file, not the scene's
-                digest.update(np.ascontiguousarray(scene.faces(name[:-len(".vertex_positions")])).tobytes())
-        for name in sorted(base):
-            digest.update(b"tangent:" + name.encode())
-            digest.update(base[name][1].tobytes())
-        digest.update(repr((float(eps), int(spp), int(seed), scene.width, scene.height, max_depth)).encode())
         folder = cache if isinstance(cache, str) else default_cache_dir()
-        path = os.path.join(folder, digest.hexdigest()[:32] + ".npy")
+        key = cache_key(scene, {name: t for name, (_, t) in base.items()}, eps, spp, seed, max_depth)
+        path = os.path.join(folder, key + ".npy")
         if os.path.exists(path):
             return np.load(path)
 
@@ -76,3 +67,21 @@ def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache:
         np.save(tmp, result)
         os.replace(tmp, path)
     return result
+
+
+def cache_key(scene: Scene, tangents: dict, eps: float, spp: int, seed: int, max_depth: int | None,
+              revision: int | None = None) -> str:
+    """The cached reference's file name (without .npy) for float32 ``tangents``, under
+    ``PRIMAL_REVISION`` unless ``revision`` is given."""
+    revision = PRIMAL_REVISION if revision is None else revision
+    digest = hashlib.sha256(scene._fingerprint + b"\0primal revision %d" % revision)
+    for name in sorted(scene.params):
+        digest.update(name.encode())
+        digest.update(np.ascontiguousarray(scene.params[name]).tobytes())
+        if name.endswith(".vertex_positions"):  # a mesh's triangles come from its file, not the scene's
+            digest.update(np.ascontiguousarray(scene.faces(name[:-len(".vertex_positions")])).tobytes())
+    for name in sorted(tangents):
+        digest.update(b"tangent:" + name.encode())
+        digest.update(tangents[name].tobytes())
+    digest.update(repr((float(eps), int(spp), int(seed), scene.width, scene.height, max_depth)).encode())
+    return digest.hexdigest()[:32]

@@ -64,8 +64,9 @@ void Mesh::update_derived() {
     const float area = 0.5f * glm::length(c);
     triangle_areas[f] = std::isfinite(area) ? area : 0.0f;
     total += triangle_areas[f];
-    // Area-weighted normals: the unnormalised cross product is 2 * area * n.
-    if (!face_normals && std::isfinite(area))
+    // Area-weighted normals: the unnormalised cross product is 2 * area * n (a duplicated
+    // triangle counts once).
+    if (!face_normals && std::isfinite(area) && distinct[f] == int(f))
       for (uint32_t i : {i0, i1, i2}) vertex_normals[i] += c;
   }
   for (auto& n : vertex_normals) {
