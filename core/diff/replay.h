@@ -35,17 +35,18 @@ struct Replay {
 
   // ---- geometry ---------------------------------------------------------------------------------
   VV vertex(int shape, uint32_t i) const { return diff_vertex(scene, params, in, shape, i); }
-  // Area-weighted vertex normal from the triangles around vertex i, each turned by its orientation
-  // and duplicates counted once (exactly as Mesh::update_derived).
+  // Area-weighted vertex normal from the triangles around vertex i, each with its
+  // Mesh::normal_sign (exactly as Mesh::update_derived).
   VV vertex_normal(int shape, uint32_t i) const {
     const Mesh& m = scene.shapes[shape].mesh();
     if (params.slot(Parameter::Kind::VertexPositions, shape) < 0) return constant(m.vertex_normals[i]);  // a translation keeps normals
     VV sum;
     for (uint32_t k = m.vertex_face_offsets[i]; k < m.vertex_face_offsets[i + 1]; ++k) {
       const uint32_t f = m.vertex_faces[k];
-      if (m.distinct[f] != int(f)) continue;
+      const int sign = m.normal_sign(f);
+      if (sign == 0) continue;
       const VV a = vertex(shape, m.indices[3 * f]), b = vertex(shape, m.indices[3 * f + 1]), c = vertex(shape, m.indices[3 * f + 2]);
-      sum = sum + cross(b - a, c - a) * Var(double(m.orientation[f]));
+      sum = sum + cross(b - a, c - a) * Var(double(sign));
     }
     return ad::dot(sum, sum).v > 0.0 ? normalize(sum) : constant(m.vertex_normals[i]);
   }

@@ -60,14 +60,13 @@ void Mesh::update_derived() {
   double total = 0.0;
   for (size_t f = 0; f < nt; ++f) {
     const uint32_t i0 = indices[3 * f], i1 = indices[3 * f + 1], i2 = indices[3 * f + 2];
-    const Vec3 c = float(orientation[f]) * glm::cross(vertex(i1) - vertex(i0), vertex(i2) - vertex(i0));
+    const Vec3 c = glm::cross(vertex(i1) - vertex(i0), vertex(i2) - vertex(i0));
     const float area = 0.5f * glm::length(c);
     triangle_areas[f] = std::isfinite(area) ? area : 0.0f;
     total += triangle_areas[f];
-    // Area-weighted normals: the unnormalised cross product is 2 * area * n (a duplicated
-    // triangle counts once).
-    if (!face_normals && std::isfinite(area) && distinct[f] == int(f))
-      for (uint32_t i : {i0, i1, i2}) vertex_normals[i] += c;
+    // Area-weighted normals: the unnormalised cross product is 2 * area * n.
+    if (!face_normals && std::isfinite(area) && normal_sign(f) != 0)
+      for (uint32_t i : {i0, i1, i2}) vertex_normals[i] += float(normal_sign(f)) * c;
   }
   for (auto& n : vertex_normals) {
     const float len = glm::length(n);

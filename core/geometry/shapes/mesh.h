@@ -44,6 +44,9 @@ struct Mesh {
   // orientation. Built once with the edges. Scans and artists' meshes have flipped triangles, and
   // convexity and facing tests need normals that agree (rendering is two-sided and does not).
   std::vector<int8_t> orientation;  // a non-orientable part keeps one seam where windings disagree
+  // A triangle's sign in the smooth vertex normals (primal and derivative alike): its orientation,
+  // 0 for a duplicate, which its first twin stands for.
+  int normal_sign(size_t f) const { return distinct[f] == int(f) ? orientation[f] : 0; }
   std::vector<float> triangle_areas;
   Distribution1D area_distribution;  // triangles by area
   float total_area = 0.0f;
