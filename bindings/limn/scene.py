@@ -198,8 +198,9 @@ class Scene:
         - ``guiding``: ``"none"`` samples the boundary sample space uniformly; ``"grid"`` uses a
           uniform grid of ``grid_resolution`` cells along the first axis (and R/4 x R/2 over the
           others); ``"octree"`` an adaptive octree (``octree_slices`` slabs along the first axis,
-          depth <= ``octree_max_depth``, ``octree_leaf_samples`` uniform samples per leaf, at most
-          ``octree_max_leaves`` leaves: beyond that it coarsens and the summary says so), sampled
+          depth <= ``octree_max_depth``, ``octree_leaf_samples`` uniform samples per leaf, one per octant
+          when a multiple of 8, at most ``octree_max_leaves`` leaves: beyond that it coarsens and the
+          summary says so), sampled
           in a mixture with the projective grid built from the same projections
           (``octree_grid_mix``, its share, default 0.5; 0: the octree alone). The grid covers the parts of
           a narrow feature next to the points that were found, which the octree's leaves there estimate as

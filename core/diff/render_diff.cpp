@@ -411,7 +411,7 @@ void guide_for_call(const Scene& scene, const DiffParams& params, const Indirect
                           std::to_string(seeds_per_pixel(opt)) + "|" +
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +
                           std::to_string(opt.octree.leaf_samples) + "," + std::to_string(opt.octree.max_leaves) + "," +
-                          std::to_string(opt.octree.refine_rounds) + "," + std::to_string(opt.octree.refine_factor) + "," +
+                          std::to_string(opt.octree.refine_rounds) + "," + std::to_string(opt.octree.refine_factor) + "," + std::to_string(opt.octree.refine_depth) + "," +
                           std::to_string(opt.octree_grid_mix) + "," + std::to_string(opt.octree_training) + "|" +
                           std::to_string(opt.direction_mix) + "," + std::to_string(opt.direction_resolution) + "," + std::to_string(opt.direction_octaves) + "|" +
                           std::to_string(ib.space().segments().size()) + "|" + std::to_string(opt.max_depth);

@@ -4,7 +4,8 @@
 // node 8 ways while it holds more than one sample and is shallower than `max_depth` (given
 // `values`, only samples whose one-sample integrand estimate is non-zero count: the others mark no
 // feature, and a feature point estimated at zero is still covered by the leaf masses). Every leaf's
-// mass is then estimated from `leaf_samples` uniform points inside it (no projections needed),
+// mass is then estimated from `leaf_samples` uniform points inside it, one per octant in each
+// round of 8 (no projections needed),
 // together with the integrand at the projected points the leaf holds (`values`, optional: a leaf
 // narrower than its feature would otherwise often miss it with a few uniform points), and leaves
 // are sampled in proportion to it, mixed with a defensive uniform component. Renders sample it
@@ -19,7 +20,8 @@
 // points missed the peak (docs/reports/projective/README.md).
 //
 // Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
-// (coarsened(), said in the summary), never dropping samples or the boundary term.
+// (the partition breadth first, refinement heaviest leaves first; coarsened(), said in the
+// summary), never dropping samples or the boundary term.
 #pragma once
 #include <cstdint>
 #include <functional>
@@ -42,6 +44,10 @@ struct OctreeOptions {
   // (docs/reports/projective/octree_refinement.md); 0 is the paper's octree.
   int refine_rounds = 2;
   float refine_factor = 1.0f;
+  // Deepest level refinement splits to; -1: max_depth (the points' partition stops there either
+  // way). For experiments (limn_guide_variance --refine-depth): deeper leaves did not pay on the
+  // paper's scenes, breadth did (docs/reports/projective/README.md, fourteenth pass).
+  int refine_depth = -1;
 };
 
 class BoundaryOctree : public BoundaryGuide {
@@ -98,6 +104,7 @@ class BoundaryOctree : public BoundaryGuide {
   bool m_coarsened = false;
   int m_deepest = 0;
   size_t m_refined = 0;  // leaves made by refine()
+  size_t m_depth_limited = 0;  // leaves heavy enough to split in the last round but at refine_depth
 };
 
 }  // namespace limn

@@ -34,7 +34,7 @@ using namespace limn;
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D] [--direction-octaves K] [--leaf-samples N] [--octree-depth D] [--guiding-seeds N] [--octree-training N]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s scene.json param [--seeds K] [--qspp N] [--spp B] [--tail K] [--grid-mix X] [--direction-resolution D] [--direction-octaves K] [--leaf-samples N] [--refine-rounds R] [--refine-factor F] [--refine-depth D] [--max-leaves N] [--octree-depth D] [--guiding-seeds N] [--octree-training N]\n", argv[0]);
     return 2;
   }
   int seeds = 4, qspp = 2048, spp = 1024, tail = 0;
@@ -51,6 +51,8 @@ int main(int argc, char** argv) {
     else if (k == "--leaf-samples") tested.octree.leaf_samples = std::stoi(argv[a + 1]);
     else if (k == "--refine-rounds") tested.octree.refine_rounds = std::stoi(argv[a + 1]);
     else if (k == "--refine-factor") tested.octree.refine_factor = std::stof(argv[a + 1]);
+    else if (k == "--max-leaves") tested.octree.max_leaves = size_t(std::stoull(argv[a + 1]));
+    else if (k == "--refine-depth") tested.octree.refine_depth = std::stoi(argv[a + 1]);
     else if (k == "--octree-depth") tested.octree.max_depth = std::stoi(argv[a + 1]);
     else if (k == "--guiding-seeds") tested.guiding_seeds = std::stoi(argv[a + 1]);
     else if (k == "--octree-training") tested.octree_training = std::stoi(argv[a + 1]);
@@ -75,6 +77,8 @@ int main(int argc, char** argv) {
         o.octree.max_depth = tested.octree.max_depth;
         o.octree.refine_rounds = tested.octree.refine_rounds;
         o.octree.refine_factor = tested.octree.refine_factor;
+        o.octree.refine_depth = tested.octree.refine_depth;
+        o.octree.max_leaves = tested.octree.max_leaves;
         o.guiding_seeds = tested.guiding_seeds;
         o.octree_training = tested.octree_training;
       }

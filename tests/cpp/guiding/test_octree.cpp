@@ -453,3 +453,50 @@ TEST_CASE("octree guiding: refinement rounds split the heavy leaves, stay normal
   opt.refine_factor = 0.0f;
   CHECK_THROWS_AS(BoundaryOctree(pts, opt, 5, 0, ridge), std::invalid_argument);
 }
+
+TEST_CASE("octree guiding: refinement under the leaf budget splits the heaviest leaves") {
+  // No points: the leaves are the 16 slabs, whose masses the uniform points estimate exactly for
+  // this integrand (constant on each slab). Slabs 1 and 14 are above the mean mass; the budget has
+  // room for one split, which must go to slab 14, the heavier one, not to the first in order.
+  auto slabs = [](const Vec3& u) {
+    const int s = std::min(int(u.x * 16.0f), 15);
+    return s == 1 ? 10.0f : s == 14 ? 100.0f : 1.0f;
+  };
+  OctreeOptions opt = small_octree(7, 8);
+  opt.refine_rounds = 1;
+  opt.max_leaves = 16 + 7;
+  const BoundaryOctree tree({}, opt, 5, 0, slabs);
+  CHECK(tree.coarsened());
+  REQUIRE(tree.leaf_count() == 16 + 7);
+  auto leaf_width = [&](float x) { return tree.region_box(tree.region_of(Vec3(x, 0.3f, 0.3f))).size.x; };
+  CHECK(leaf_width(14.5f / 16.0f) == doctest::Approx(1.0 / 32.0));
+  CHECK(leaf_width(1.5f / 16.0f) == doctest::Approx(1.0 / 16.0));
+  Pcg32 rng(22);
+  check_density(tree, rng);
+}
+
+TEST_CASE("octree guiding: a leaf's uniform points are one per octant and per eighth along each axis") {
+  // A feature that fills one octant of a slab: independent points miss it in (7/8)^8 = 34 % of
+  // the leaves, one point per octant never does, so the slab's share is the same for every seed.
+  auto octant = [](const Vec3& u) { return u.x < 0.25f && u.y < 0.5f && u.z < 0.5f ? 1.0f : 0.0f; };
+  // A layer an eighth thick along each axis in turn, in both slabs: one point per eighth puts
+  // exactly one point in it in every leaf, so both slabs get the same mass and the density is 1.
+  auto layer = [](int axis) {
+    return [axis](const Vec3& u) {
+      const float c = axis == 0 ? 2.0f * u.x - std::floor(2.0f * u.x) : u[axis];  // along x, within each slab
+      return c >= 0.375f && c < 0.5f ? 1.0f : 0.0f;
+    };
+  };
+  OctreeOptions opt = small_octree(7, 8);
+  opt.slices = 2;
+  for (uint64_t seed = 0; seed < 16; ++seed) {
+    const BoundaryOctree tree({}, opt, seed, 0, octant);
+    REQUIRE(tree.leaf_count() == 2);
+    CHECK(tree.pdf(Vec3(0.4f, 0.9f, 0.9f)) == doctest::Approx((0.9 + 0.1 * 0.5) / 0.5).epsilon(1e-5));
+    for (int axis = 0; axis < 3; ++axis) {
+      const BoundaryOctree layered({}, opt, seed, 0, layer(axis));
+      CHECK(layered.pdf(Vec3(0.3f, 0.5f, 0.5f)) == doctest::Approx(1.0).epsilon(1e-5));
+      CHECK(layered.pdf(Vec3(0.7f, 0.5f, 0.5f)) == doctest::Approx(1.0).epsilon(1e-5));
+    }
+  }
+}
