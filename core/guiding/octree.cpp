@@ -308,9 +308,16 @@ Vec3 BoundaryOctree::sample(const Vec3d& u, float* pdf) const {
     lo += Vec3d(bx, by, bz) * size;
     node = first + c;
   }
-  const Vec3 p = glm::min(Vec3(lo + size * v), Vec3(1.0f - 1e-7f));
-  // The density of the leaf that holds p (rounding at a leaf's far face can land in the next one).
-  *pdf = this->pdf(p);
+  // Kept inside the leaf the descent chose: lo + size v rounds onto the leaf's far face for v close
+  // to 1, and there the next leaf's density would stand for it. Next to a leaf of no mass that is
+  // the defensive density, 10^4 - 10^5 times too low where the integrand peaks at the face (one of
+  // 16 sphere renders at 1024 spp had a relative RMSE of 1.93 from a single such sample).
+  const int l = m_nodes[size_t(node)].leaf;
+  const Leaf& leaf = m_leaves[size_t(l)];
+  Vec3 p(lo + size * v);
+  for (int a = 0; a < 3; ++a) p[a] = std::clamp(p[a], leaf.lo[a], std::nextafter(leaf.lo[a] + leaf.size[a], leaf.lo[a]));
+  if (leaf_at(p) != l) p = leaf.lo + 0.5f * leaf.size;  // a face rounded differently from the descent's
+  *pdf = m_select.pmf(size_t(l)) / (leaf.size.x * leaf.size.y * leaf.size.z);
   return p;
 }
 

@@ -500,3 +500,27 @@ TEST_CASE("octree guiding: a leaf's uniform points are one per octant and per ei
     }
   }
 }
+
+TEST_CASE("octree guiding: a sample stays in the leaf it was drawn in, also at the leaf's far face") {
+  // One slab split once (two points in its lower octant); the integrand is 1 up to y = 0.5
+  // inclusive, so the upper leaves hold only the defensive density. Numbers u.y just below the
+  // lower leaves' share put v close to 1 there, where lo + size v rounds onto the face y = 0.5:
+  // that point must still be the lower leaf's, with its density.
+  OctreeOptions opt = small_octree(1, 8);
+  opt.slices = 1;
+  auto lower = [](const Vec3& u) { return u.y <= 0.5f ? 1.0f : 0.0f; };
+  const BoundaryOctree tree({Vec3(0.1f, 0.1f, 0.1f), Vec3(0.2f, 0.2f, 0.2f)}, opt, 3, 0, lower);
+  REQUIRE(tree.leaf_count() == 8);
+  auto prob = [&](float x, float y, float z) { return tree.region_probability(tree.region_of(Vec3(x, y, z))); };
+  // u.x = 0.25 picks the lower x half (the halves are equal); then the share of the lower y half.
+  const double share = (prob(0.25f, 0.25f, 0.25f) + prob(0.25f, 0.25f, 0.75f)) /
+                       (prob(0.25f, 0.25f, 0.25f) + prob(0.25f, 0.75f, 0.25f) + prob(0.25f, 0.25f, 0.75f) + prob(0.25f, 0.75f, 0.75f));
+  const float lower_density = float(prob(0.25f, 0.25f, 0.25f) / 0.125);
+  for (int k = 1; k <= 64; ++k) {
+    float pdf;
+    const Vec3 p = tree.sample(Vec3d(0.25, share * (1.0 - k * 0x1p-30), 0.3), &pdf);
+    CHECK(p.y < 0.5f);
+    CHECK(pdf == doctest::Approx(lower_density).epsilon(1e-5));
+    CHECK(pdf == doctest::Approx(tree.pdf(p)).epsilon(1e-6));
+  }
+}
