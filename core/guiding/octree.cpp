@@ -24,6 +24,11 @@ void check_options(const OctreeOptions& opt) {
   if (!(opt.refine_factor > 0.0f) || !std::isfinite(opt.refine_factor)) throw std::invalid_argument("octree guiding: refine_factor must be > 0 (got " + std::to_string(opt.refine_factor) + ")");
 }
 
+// A leaf's depth below its slab root (the second axis is never split by the slabs).
+int depth_of(const Vec3& size) { return int(std::lround(-std::log2(double(size.y)))); }
+
+int refine_limit(const OctreeOptions& opt) { return opt.refine_depth < 0 ? opt.max_depth : opt.refine_depth; }
+
 bool inside_unit_cube(const Vec3& p) { return p.x >= 0.0f && p.x < 1.0f && p.y >= 0.0f && p.y < 1.0f && p.z >= 0.0f && p.z < 1.0f; }
 
 }  // namespace
@@ -112,7 +117,7 @@ void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float
   for (double m : mass) total += m;
   if (!(total > 0.0)) return;
   const double threshold = m_opt.refine_factor * total / double(m_leaves.size());
-  const int deepest = m_opt.refine_depth < 0 ? m_opt.max_depth : m_opt.refine_depth;
+  const int deepest = refine_limit(m_opt);
   std::vector<int> leaf_node(m_leaves.size(), -1);
   for (size_t k = 0; k < m_nodes.size(); ++k)
     if (m_nodes[k].child < 0) leaf_node[size_t(m_nodes[k].leaf)] = int(k);
@@ -122,7 +127,7 @@ void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float
   std::vector<size_t> heavy;
   for (size_t l = 0; l < m_leaves.size(); ++l) {
     if (!(mass[l] > threshold)) continue;
-    if (int(std::lround(-std::log2(double(m_leaves[l].size.y)))) >= deepest) ++m_depth_limited;
+    if (depth_of(m_leaves[l].size) >= deepest) ++m_depth_limited;
     else heavy.push_back(l);
   }
   const size_t room = (m_opt.max_leaves - m_leaves.size()) / 7;
@@ -136,7 +141,7 @@ void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float
   std::vector<size_t> fresh;     // leaves whose mass is to be estimated
   std::vector<double> inherited;  // an eighth of each fresh leaf's parent's mass
   for (size_t l : heavy) {
-    const int depth = int(std::lround(-std::log2(double(m_leaves[l].size.y))));
+    const int depth = depth_of(m_leaves[l].size);
     const Leaf parent = m_leaves[l];
     const double parent_mass = mass[l];
     const int node = leaf_node[l], first = int(m_nodes.size());
@@ -315,7 +320,7 @@ Vec3 BoundaryOctree::sample(const Vec3d& u, float* pdf) const {
   const int l = m_nodes[size_t(node)].leaf;
   const Leaf& leaf = m_leaves[size_t(l)];
   Vec3 p(lo + size * v);
-  for (int a = 0; a < 3; ++a) p[a] = std::clamp(p[a], leaf.lo[a], std::nextafter(leaf.lo[a] + leaf.size[a], leaf.lo[a]));
+  for (int a = 0; a < 3; ++a) p[a] = std::clamp(p[a], leaf.lo[a], std::min(std::nextafter(leaf.lo[a] + leaf.size[a], leaf.lo[a]), 1.0f - 1e-7f));
   if (leaf_at(p) != l) p = leaf.lo + 0.5f * leaf.size;  // a face rounded differently from the descent's
   *pdf = m_select.pmf(size_t(l)) / (leaf.size.x * leaf.size.y * leaf.size.z);
   return p;
@@ -349,7 +354,7 @@ std::string BoundaryOctree::describe() const {
          std::to_string(m_empty) + " empty), depth <= " + std::to_string(m_deepest) + ", " +
          std::to_string(m_opt.leaf_samples) + " uniform samples per leaf" +
          (m_refined > 0 ? ", " + std::to_string(m_refined) + " leaves from " + std::to_string(m_opt.refine_rounds) + " refinement rounds (" +
-                                 std::to_string(m_depth_limited) + " heavy leaves at depth " + std::to_string(m_opt.refine_depth < 0 ? m_opt.max_depth : m_opt.refine_depth) + " in the last)" : "") +
+                                 std::to_string(m_depth_limited) + " heavy leaves at depth " + std::to_string(refine_limit(m_opt)) + " in the last)" : "") +
          (m_coarsened ? ", COARSENED at the leaf budget (max_leaves " + std::to_string(m_opt.max_leaves) + ")" : "");
 }
 
