@@ -188,7 +188,7 @@ class Scene:
         parameter}; differentiable parameters that are not listed get a zero tangent).
 
         Terms: the interior term (``spp_interior`` paths per pixel, default ``spp`` or the scene's
-        sampler), the primary-visibility boundary term for silhouettes seen directly
+        sampler; 0 switches it off), the primary-visibility boundary term for silhouettes seen directly
         (``spp_primary`` samples per pixel on average, default the same; 0 switches it off), and the
         indirect boundary term for mesh edges and sphere surfaces: shadows and silhouettes seen in
         reflections (``spp_boundary``, default the same).
@@ -250,7 +250,7 @@ class Scene:
           ``threads`` (0: all cores).
 
         Scenes with a ``heightfield`` shape and differentiable geometry use the heightfield estimator
-        (Tong et al. 2023) instead of all three terms (``spp_interior`` paths per pixel; the boundary
+        (Tong et al. 2023) instead of all three terms (``spp_interior`` >= 1 paths per pixel; the boundary
         sample counts and guiding options do not apply): ``heightfield_mipmap=False`` searches
         discontinuities without the maximum mipmap (brute force, for comparison),
         ``heightfield_curvature_test=False`` skips mipmap nodes by their maximum height only (not

@@ -67,6 +67,8 @@ void for_each_pixel(const Scene& scene, const DiffOptions& opt, PerPixel&& per_p
   if (cancelled) throw RenderCancelled();
 }
 
+int interior_spp(const Scene& scene, const DiffOptions& opt) { return opt.spp_interior < 0 ? scene.spp : opt.spp_interior; }
+
 void validate(const Scene& scene, const DiffParams& params, const DiffOptions& opt) {
   if (params.empty()) throw std::invalid_argument(scene.source + ": no differentiable parameters (call set_differentiable first)");
   if (opt.boundary_sampler != "independent" && opt.boundary_sampler != "stratified")
@@ -94,7 +96,12 @@ void validate(const Scene& scene, const DiffParams& params, const DiffOptions& o
     throw std::invalid_argument(scene.source + ": octree_training must be >= 0 (got " + std::to_string(opt.octree_training) + ")");
   if (opt.guiding_spp < 1 || opt.guiding_seeds < 0)
     throw std::invalid_argument(scene.source + ": guiding_spp must be >= 1 and guiding_seeds >= 0 (0: the guide's default)");
-  if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < 0) throw std::invalid_argument(scene.source + ": sample counts must be >= 0");
+  if (opt.spp_boundary < 0 || opt.spp_primary < 0 || opt.spp_interior < -1)
+    throw std::invalid_argument(scene.source + ": sample counts must be >= 0 (spp_interior also -1: the scene's)");
+  if (interior_spp(scene, opt) == 0 && params.any_geometry())
+    for (const Shape& s : scene.shapes)
+      if (s.is_heightfield())  // Tong et al. 2023: its boundary terms ride on the interior paths
+        throw std::invalid_argument(scene.source + ": heightfield '" + s.id + "' needs spp_interior >= 1 (its estimator has no separate boundary term)");
 }
 
 // The boundary terms that are switched on, built for this call (kept for the summary).
@@ -110,7 +117,8 @@ struct BoundaryTerms {
 std::vector<std::string> summarize(const Scene& scene, const DiffParams& params, int spp, const DiffOptions& opt,
                                    const PrimaryBoundary* primary, const IndirectBoundary* indirect, const BoundaryTerms* terms) {
   std::vector<std::string> s;
-  s.push_back("interior term: " + std::to_string(spp) + " paths per pixel, material-form replay");
+  s.push_back(spp > 0 ? "interior term: " + std::to_string(spp) + " paths per pixel, material-form replay"
+                      : std::string("interior term: off (spp_interior 0)"));
   if (!params.any_geometry()) {
     s.push_back("boundary terms: skipped, no differentiable geometry (nothing can change visibility)");
     return s;
@@ -518,7 +526,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
   const auto lock = scene.render_lock();
   const int max_depth = effective_max_depth(scene, opt.max_depth);
   const int W = scene.camera.width, H = scene.camera.height;
-  const int spp = opt.spp_interior > 0 ? opt.spp_interior : scene.spp;
+  const int spp = interior_spp(scene, opt);
   Image img{W, H, std::vector<float>(size_t(W) * H * 3, 0.0f)};
   std::atomic<uint64_t> rays{0}, invalid{0};
   const std::unique_ptr<HeightfieldEstimator> hfe = heightfield_estimator(scene, params, opt);
@@ -549,7 +557,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
       for (int c = 0; c < 3; ++c) sum[c] += d[c];
     }
     float* px = &img.rgb[3 * (size_t(y) * W + x)];
-    for (int c = 0; c < 3; ++c) px[c] = float(sum[c] / spp);
+    for (int c = 0; c < 3; ++c) px[c] = spp > 0 ? float(sum[c] / spp) : 0.0f;
     rays += counters.rays;
     invalid += bad;
   });
@@ -589,7 +597,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
   const auto start = std::chrono::steady_clock::now();
   const auto lock = scene.render_lock();
   const int max_depth = effective_max_depth(scene, opt.max_depth);
-  const int spp = opt.spp_interior > 0 ? opt.spp_interior : scene.spp;
+  const int spp = interior_spp(scene, opt);
   ThreadSums grads(params.slot_count());
   std::atomic<uint64_t> rays{0}, invalid{0};
   const std::unique_ptr<HeightfieldEstimator> hfe = heightfield_estimator(scene, params, opt);

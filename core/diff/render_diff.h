@@ -69,7 +69,7 @@ constexpr int kDirectionOctaves = 2;
 constexpr int kGridOctaves = 2;
 
 struct DiffOptions {
-  int spp_interior = 0;   // 0: the scene's sample count
+  int spp_interior = -1;  // interior-term paths per pixel (-1: the scene's sample count; 0: off)
   int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
   int spp_boundary = 0;   // indirect boundary samples, per pixel on average (0: off)
   // Indirect boundary: the call's points of [0,1)^3 "independent" or "stratified" (core/math/sequence.h).

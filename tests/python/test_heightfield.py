@@ -66,6 +66,16 @@ def test_cone_growing_agrees_with_fd_and_needs_the_reparameterisation():
         assert np.abs(block_z(one, fd)).max() < 5.0, mix
 
 
+def test_heightfield_refuses_to_switch_the_interior_term_off():
+    """The heightfield estimator's boundary terms ride on its interior paths: spp_interior=0 would
+    leave nothing, so it is refused with the shape named."""
+    d = scene_dict("cone")
+    scene = load(d)
+    scene.set_differentiable(["terrain.heights"])
+    with pytest.raises(ValueError, match="heightfield 'terrain' needs spp_interior >= 1"):
+        scene.render_forward({"terrain.heights": heights_of(d)}, spp_interior=0)
+
+
 def test_interval_choice_removes_the_sliver_tail_and_every_camera_interval_the_rest():
     """Eq. 6 leaves the interval distribution p(j) open. Proportional to width alone, the sliver
     between the cone tip's silhouette and a pixel's theta-range end is chosen rarely and weighted by

@@ -79,6 +79,22 @@ def x_translation(scene, name):
     return t
 
 
+def test_each_term_switches_off_and_the_terms_add_up():
+    """spp_interior, spp_primary and spp_boundary at 0 each switch their term off (spp_interior 0 used
+    to mean "the scene's sample count"), and with one seed the terms rendered apart add up to the
+    full derivative image."""
+    scene, name, _ = moving_box()
+    t = np.asarray(scene.params[name]).copy()  # scaling about the origin: under a translation the interior term is 0
+    render = partial(quiet, scene.render_forward, {name: t}, seed=5)
+    full = render(spp_interior=8, spp_primary=8, spp_boundary=16)
+    interior = render(spp_interior=8, spp_primary=0, spp_boundary=0)
+    boundary = render(spp_interior=0, spp_primary=8, spp_boundary=16)
+    assert np.abs(interior).max() > 0 and np.abs(boundary).max() > 0
+    np.testing.assert_allclose(interior + boundary, full, rtol=1e-6, atol=1e-6 * np.abs(full).max())
+    assert "interior term: off (spp_interior 0)" in scene.last_stats["summary"]
+    assert not render(spp_interior=0, spp_primary=0, spp_boundary=0).any()
+
+
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_moving_occluder_shadow(light, spp_boundary):
     scene = load(shadow_scene(light))
