@@ -138,9 +138,10 @@ class Scene:
             raise ValueError(f"project_seed must be 'bsdf', 'emitter' or 'both' (got '{opts['project_seed']}')")
         if seed < 0:
             raise ValueError(f"seed must be >= 0 (got {seed})")
-        interior = spp_interior if spp_interior is not None else (spp or self.spp)
-        spp_primary = spp_primary if spp_primary is not None else interior
-        spp_boundary = spp_boundary if spp_boundary is not None else interior
+        base = spp or self.spp  # every term's default, also when another term is switched off
+        interior = spp_interior if spp_interior is not None else base
+        spp_primary = spp_primary if spp_primary is not None else base
+        spp_boundary = spp_boundary if spp_boundary is not None else base
         for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
             if v < 0:
                 raise ValueError(f"{name} must be >= 0 (got {v})")
@@ -189,9 +190,9 @@ class Scene:
 
         Terms: the interior term (``spp_interior`` paths per pixel, default ``spp`` or the scene's
         sampler; 0 switches it off), the primary-visibility boundary term for silhouettes seen directly
-        (``spp_primary`` samples per pixel on average, default the same; 0 switches it off), and the
+        (``spp_primary`` samples per pixel on average, default ``spp`` or the scene's as well; 0 switches it off), and the
         indirect boundary term for mesh edges and sphere surfaces: shadows and silhouettes seen in
-        reflections (``spp_boundary``, default the same).
+        reflections (``spp_boundary``, default ``spp`` or the scene's as well; 0 switches it off).
 
         Options (keyword arguments, defaults in ``Scene.DIFF_OPTIONS``):
 

@@ -93,6 +93,8 @@ def test_each_term_switches_off_and_the_terms_add_up():
     np.testing.assert_allclose(interior + boundary, full, rtol=1e-6, atol=1e-6 * np.abs(full).max())
     assert "interior term: off (spp_interior 0)" in scene.last_stats["summary"]
     assert not render(spp_interior=0, spp_primary=0, spp_boundary=0).any()
+    # The other terms' defaults follow spp, not the interior's count.
+    np.testing.assert_array_equal(render(spp=8, spp_interior=0, spp_boundary=16), boundary)
 
 
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
