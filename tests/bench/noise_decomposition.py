@@ -70,7 +70,7 @@ def main() -> None:
                                                   "noise_decomposition.md"))
     args = ap.parse_args()
     results = {s: measure(s, args.budget, args.runs) for s in args.scenes}
-    cmd = "python3 tests/bench/noise_decomposition.py " + " ".join(sys.argv[1:])
+    cmd = ".venv/bin/python tests/bench/noise_decomposition.py " + " ".join(sys.argv[1:])
     lines = ["# Where the derivative image's noise comes from", "",
              f"Regenerate: `{cmd.strip()}`", "",
              *[l for l in __doc__.split("\n\n")[1].splitlines()], "",
