@@ -121,14 +121,44 @@ void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float
   std::vector<int> leaf_node(m_leaves.size(), -1);
   for (size_t k = 0; k < m_nodes.size(); ++k)
     if (m_nodes[k].child < 0) leaf_node[size_t(m_nodes[k].leaf)] = int(k);
-  // The leaves to split: heavy and above refine_depth; beyond the leaf budget the heaviest ones
-  // (the budget coarsens where the mass is least), split in index order either way.
-  m_depth_limited = 0;
-  std::vector<size_t> heavy;
+  // The leaves to split: heavy and above refine_depth, and their coarse face neighbours; beyond
+  // the leaf budget the heaviest ones (the budget coarsens where the mass is least), split in
+  // index order either way.
+  std::vector<size_t> heavy, limited;
   for (size_t l = 0; l < m_leaves.size(); ++l) {
     if (!(mass[l] > threshold)) continue;
-    if (depth_of(m_leaves[l].size) >= deepest) ++m_depth_limited;
+    if (depth_of(m_leaves[l].size) >= deepest) limited.push_back(l);
     else heavy.push_back(l);
+  }
+  m_depth_limited = limited.size();
+  std::vector<char> neighbour;
+  if (m_opt.refine_neighbours) {
+    // Face neighbours of heavy leaves that are at least 2 levels coarser: the point just across a
+    // face's centre lies in such a neighbour whenever one touches the face (the tree is aligned).
+    // Half the finest cell's width along the axis reaches across and stays inside the neighbour.
+    const double finest = std::ldexp(1.0, -m_opt.max_depth);
+    const Vec3 step(float(0.5 * finest / m_opt.slices), float(0.5 * finest), float(0.5 * finest));
+    std::vector<char> chosen(m_leaves.size(), 0);  // 1: heavy, 2: a coarse neighbour
+    for (size_t l : heavy) chosen[l] = 1;
+    std::vector<size_t> over = heavy;
+    over.insert(over.end(), limited.begin(), limited.end());
+    for (size_t o : over) {
+      const Leaf& h = m_leaves[o];
+      const int depth = depth_of(h.size);
+      const Vec3 centre = h.lo + 0.5f * h.size;
+      for (int a = 0; a < 3; ++a)
+        for (int side = 0; side < 2; ++side) {
+          Vec3 q = centre;
+          q[a] = side ? h.lo[a] + h.size[a] + step[a] : h.lo[a] - step[a];
+          if (!inside_unit_cube(q)) continue;
+          const size_t n = size_t(leaf_at(q));
+          if (chosen[n] || depth_of(m_leaves[n].size) > depth - 2) continue;
+          chosen[n] = 2;
+          heavy.push_back(n);
+        }
+    }
+    std::sort(heavy.begin(), heavy.end());
+    neighbour = std::move(chosen);
   }
   const size_t room = (m_opt.max_leaves - m_leaves.size()) / 7;
   if (heavy.size() > room) {
@@ -138,6 +168,7 @@ void BoundaryOctree::refine(std::vector<double>& mass, const std::function<float
     heavy.resize(room);
     std::sort(heavy.begin(), heavy.end());
   }
+  for (size_t l : heavy) m_neighbours_split += !neighbour.empty() && neighbour[l] == 2;
   std::vector<size_t> fresh;     // leaves whose mass is to be estimated
   std::vector<double> inherited;  // an eighth of each fresh leaf's parent's mass
   for (size_t l : heavy) {
@@ -354,7 +385,8 @@ std::string BoundaryOctree::describe() const {
          std::to_string(m_empty) + " empty), depth <= " + std::to_string(m_deepest) + ", " +
          std::to_string(m_opt.leaf_samples) + " uniform samples per leaf" +
          (m_refined > 0 ? ", " + std::to_string(m_refined) + " leaves from " + std::to_string(m_opt.refine_rounds) + " refinement rounds (" +
-                                 std::to_string(m_depth_limited) + " heavy leaves at depth " + std::to_string(refine_limit(m_opt)) + " in the last)" : "") +
+                                 std::to_string(m_depth_limited) + " heavy leaves at depth " + std::to_string(refine_limit(m_opt)) + " in the last" +
+                                 (m_opt.refine_neighbours ? ", " + std::to_string(m_neighbours_split) + " coarse neighbours of heavy leaves split" : "") + ")" : "") +
          (m_coarsened ? ", COARSENED at the leaf budget (max_leaves " + std::to_string(m_opt.max_leaves) + ")" : "");
 }
 

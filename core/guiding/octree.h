@@ -19,6 +19,8 @@
 // rest; left out, a leaf around a narrow peak they found kept a zero mass whenever its uniform
 // points missed the peak (docs/reports/projective/README.md).
 //
+// Refinement rounds split the heavy leaves and their coarse face neighbours (OctreeOptions).
+//
 // Memory is bounded by `max_leaves`: when splitting would exceed it the tree stops growing there
 // (the partition breadth first, refinement heaviest leaves first; coarsened(), said in the
 // summary), never dropping samples or the boundary term.
@@ -48,6 +50,14 @@ struct OctreeOptions {
   // way). For experiments (limn_guide_variance --refine-depth): deeper leaves did not pay on the
   // paper's scenes, breadth did (docs/reports/projective/README.md, fourteenth pass).
   int refine_depth = -1;
+  // Refinement also splits a heavy leaf's face neighbours that are 2 or more levels coarser than
+  // it: a peak that crosses the face into a large leaf is otherwise missed by that leaf's few
+  // uniform points, which leaves it at a low density right next to the peak. The indirect term's
+  // run-to-run noise at 1024 spp (6 runs, tests/bench/noise_decomposition.py): cube with a hole
+  // 0.0140 -> 0.0044 (one sample at 1/28 of the density around it made a 44-sigma pixel),
+  // sphere 0.0057 -> 0.0048, torus 0.0140 -> 0.0106, bunny 0.0661 -> 0.0578, for 2-6 % more
+  // set-up (docs/reports/projective/README.md, fifteenth pass). false: for comparisons.
+  bool refine_neighbours = true;
 };
 
 class BoundaryOctree : public BoundaryGuide {
@@ -104,6 +114,7 @@ class BoundaryOctree : public BoundaryGuide {
   bool m_coarsened = false;
   int m_deepest = 0;
   size_t m_refined = 0;  // leaves made by refine()
+  size_t m_neighbours_split = 0;  // coarse neighbours of heavy leaves split (refine_neighbours)
   size_t m_depth_limited = 0;  // leaves heavy enough to split in the last round but at refine_depth
 };
 

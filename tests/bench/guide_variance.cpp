@@ -53,6 +53,7 @@ int main(int argc, char** argv) {
     else if (k == "--refine-factor") tested.octree.refine_factor = std::stof(argv[a + 1]);
     else if (k == "--max-leaves") tested.octree.max_leaves = size_t(std::stoull(argv[a + 1]));
     else if (k == "--refine-depth") tested.octree.refine_depth = std::stoi(argv[a + 1]);
+    else if (k == "--refine-neighbours") tested.octree.refine_neighbours = std::stoi(argv[a + 1]) != 0;
     else if (k == "--octree-depth") tested.octree.max_depth = std::stoi(argv[a + 1]);
     else if (k == "--guiding-seeds") tested.guiding_seeds = std::stoi(argv[a + 1]);
     else if (k == "--octree-training") tested.octree_training = std::stoi(argv[a + 1]);
@@ -78,6 +79,7 @@ int main(int argc, char** argv) {
         o.octree.refine_rounds = tested.octree.refine_rounds;
         o.octree.refine_factor = tested.octree.refine_factor;
         o.octree.refine_depth = tested.octree.refine_depth;
+        o.octree.refine_neighbours = tested.octree.refine_neighbours;
         o.octree.max_leaves = tested.octree.max_leaves;
         o.guiding_seeds = tested.guiding_seeds;
         o.octree_training = tested.octree_training;

@@ -524,3 +524,55 @@ TEST_CASE("octree guiding: a sample stays in the leaf it was drawn in, also at t
     CHECK(pdf == doctest::Approx(tree.pdf(p)).epsilon(1e-6));
   }
 }
+
+TEST_CASE("octree guiding: refinement splits a heavy leaf's coarse face neighbours") {
+  // A peak straddles the face z = 1/2 of slab 8. Projected points found only its lower half, so
+  // the partition is deep below the face and one large leaf (depth 1) lies above it, whose 8
+  // uniform points miss the peak's upper half: without neighbour splits it stays at the defensive
+  // density right next to the peak (the cube with a hole's 1024-spp spike, docs/reports/projective/README.md).
+  const Vec3 peak(0.53125f, 0.3f, 0.5f), half(0.008f, 0.04f, 0.04f);
+  auto f = [peak, half](const Vec3& u) {
+    const Vec3 d = glm::abs(u - peak);
+    return d.x < half.x && d.y < half.y && d.z < half.z ? 1000.0f : 0.0f;
+  };
+  Pcg32 rng(31);
+  std::vector<Vec3> pts;
+  std::vector<float> values;
+  for (int i = 0; i < 64; ++i) {
+    pts.push_back(peak + half * Vec3(2.0f * rng.next_float() - 1.0f, 2.0f * rng.next_float() - 1.0f, -rng.next_float()));
+    values.push_back(f(pts.back()));
+  }
+  OctreeOptions opt = small_octree(7, 8);
+  opt.refine_rounds = 3;
+  opt.refine_neighbours = false;
+  const BoundaryOctree plain(pts, opt, 5, 0, f, values);
+  opt.refine_neighbours = true;
+  const BoundaryOctree balanced(pts, opt, 5, 0, f, values);
+  const Vec3 above = peak + Vec3(0.0f, 0.0f, 0.5f * half.z);  // in the peak's upper half
+  auto depth = [&](const BoundaryOctree& g) { return int(std::lround(-std::log2(g.region_box(g.region_of(above)).size.y))); };
+  CHECK(depth(plain) == 1);
+  CHECK(depth(balanced) >= 3);
+  CHECK(balanced.pdf(above) > 10.0f * plain.pdf(above));
+  CHECK(balanced.describe().find("coarse neighbours of heavy leaves split") != std::string::npos);
+  const auto [chi, q] = chi_square(balanced, 200000, rng);
+  CHECK(chi < q);
+  // Relative second moment of the integral's estimate, from stratified points over the peak's box
+  // (f is zero elsewhere): the upper half at the defensive density dominates the plain tree's.
+  auto second_moment = [&](const BoundaryOctree& g) {
+    double s = 0.0, s2 = 0.0;
+    const int n = 64;
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j)
+        for (int k = 0; k < n; ++k) {
+          const Vec3 p = peak + half * (2.0f * Vec3((i + rng.next_float()) / n, (j + rng.next_float()) / n, (k + rng.next_float()) / n) - 1.0f);
+          const double v = f(p);
+          s += v;
+          s2 += v * v / g.pdf(p);
+        }
+    const double box = 8.0 * double(half.x) * half.y * half.z, N = double(n) * n * n;
+    return (s2 * box / N) / ((s * box / N) * (s * box / N));
+  };
+  const double v_plain = second_moment(plain), v_balanced = second_moment(balanced);
+  MESSAGE("relative second moment: plain " << v_plain << ", with neighbour splits " << v_balanced);
+  CHECK(v_balanced < 0.5 * v_plain);
+}
