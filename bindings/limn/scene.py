@@ -214,7 +214,9 @@ class Scene:
           ``octree_refine_rounds`` (default 2; 0: off, as in the paper) rounds then split every leaf of more than
           ``octree_refine_factor`` (default 1) times the mean leaf mass into 8 and estimate the new
           leaves' masses from ``octree_leaf_samples`` uniform points each (resolution where the mass
-          is; not in the paper; docs/reports/projective/octree_refinement.md has its cost and gain).
+          is), together with those leaves' face neighbours that are two or more levels coarser (a
+          peak crossing into a large leaf is otherwise missed by its few points); not in the paper;
+          docs/reports/projective/octree_refinement.md has the rounds' cost and gain.
         - ``direction_mix`` (projective grid and octree, default 0.2): the share of the projections'
           direction histogram in the mixture (the octree's and the grid's shares above are of the rest),
           ``direction_resolution`` squared cells (default 256, at most 4096) over the sample space's second
