@@ -25,10 +25,8 @@ def fd(scene: Scene, tangents: dict, eps: float, spp: int, seed: int = 0, cache:
     Each pixel draws from one stream, so a path that drew a different count of numbers in the two
     renders would shift the pixel's later samples (on the projective sphere scene the two renders
     differ only in the samples the move changed: docs/reports/projective/README.md, fifteenth
-    pass). Near moving edges the
-    noise grows about as 1/eps, and eps trades it against the bias, O(eps^2) where the image is
-    smooth in theta
-    (docs/reports/projective/reference.md). ``tangents`` maps parameter names to arrays shaped like
+    pass). Near moving edges the noise grows about as 1/eps, and eps trades it against the bias,
+    O(eps^2) where the image is smooth in theta (docs/reports/projective/reference.md). ``tangents`` maps parameter names to arrays shaped like
     the parameters. The parameters are restored afterwards. Results are cached on disk (``cache``:
     True for the default folder, $LIMN_FD_CACHE or ~/.cache/limn/fd; a path; or False), keyed by
     the scene's source, every parameter value, each mesh's triangles, the tangents, the settings and
