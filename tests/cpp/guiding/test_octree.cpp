@@ -87,6 +87,24 @@ void check_density(const BoundaryGuide& g, Pcg32& rng) {
   CHECK(chi < q);
 }
 
+// Relative second moment E_p[(f/p)^2] / F^2 = (int f^2 / p) / (int f)^2 of the integral's estimate
+// under a guide, from n^3 stratified points over the box lo + size [0,1)^3 outside which f is zero
+// (not from the guide: no tail goes unseen).
+template <class F>
+double relative_second_moment(const BoundaryGuide& g, F f, const Vec3& lo, const Vec3& size, int n, Pcg32& rng) {
+  double s = 0.0, s2 = 0.0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j)
+      for (int k = 0; k < n; ++k) {
+        const Vec3 p = lo + size * Vec3((i + rng.next_float()) / n, (j + rng.next_float()) / n, (k + rng.next_float()) / n);
+        const double v = f(p);
+        s += v;
+        s2 += v * v / g.pdf(p);
+      }
+  const double box = double(size.x) * size.y * size.z, N = double(n) * n * n;
+  return (s2 * box / N) / ((s * box / N) * (s * box / N));
+}
+
 }  // namespace
 
 TEST_CASE("octree guiding: pdf integrates to 1, samples follow it, defensive mass everywhere") {
@@ -429,21 +447,7 @@ TEST_CASE("octree guiding: refinement rounds split the heavy leaves, stay normal
   CHECK(refined.leaf_count() > plain.leaf_count() + 100);
   CHECK(refined.describe().find("refinement rounds") != std::string::npos);
   check_density(refined, rng);
-  // Relative second moment E_p[(f/p)^2] / F^2 = (int f^2 / p) / (int f)^2 of the integral's
-  // estimate under each guide, from stratified points (not from the guide: no tail goes unseen).
-  auto second_moment = [&](const BoundaryOctree& g) {
-    double s = 0.0, s2 = 0.0;
-    const int n = 256;
-    for (int i = 0; i < n; ++i)
-      for (int j = 0; j < n; ++j)
-        for (int k = 0; k < n; ++k) {
-          const Vec3 p((i + rng.next_float()) / n, (j + rng.next_float()) / n, (k + rng.next_float()) / n);
-          const double f = ridge(p);
-          s += f;
-          s2 += f * f / g.pdf(p);
-        }
-    return s2 / (s * s) * (double(n) * n * n);
-  };
+  auto second_moment = [&](const BoundaryOctree& g) { return relative_second_moment(g, ridge, Vec3(0.0f), Vec3(1.0f), 256, rng); };
   const double v_plain = second_moment(plain), v_refined = second_moment(refined);
   MESSAGE("relative second moment: plain " << v_plain << ", refined " << v_refined);
   CHECK(v_refined < 0.9 * v_plain);  // 328 -> 273 here; 1.2-2.4x on the paper's scenes (limn_guide_variance --refine-rounds 2)
@@ -556,22 +560,9 @@ TEST_CASE("octree guiding: refinement splits a heavy leaf's coarse face neighbou
   CHECK(balanced.describe().find("coarse neighbours of heavy leaves split") != std::string::npos);
   const auto [chi, q] = chi_square(balanced, 200000, rng);
   CHECK(chi < q);
-  // Relative second moment of the integral's estimate, from stratified points over the peak's box
-  // (f is zero elsewhere): the upper half at the defensive density dominates the plain tree's.
-  auto second_moment = [&](const BoundaryOctree& g) {
-    double s = 0.0, s2 = 0.0;
-    const int n = 64;
-    for (int i = 0; i < n; ++i)
-      for (int j = 0; j < n; ++j)
-        for (int k = 0; k < n; ++k) {
-          const Vec3 p = peak + half * (2.0f * Vec3((i + rng.next_float()) / n, (j + rng.next_float()) / n, (k + rng.next_float()) / n) - 1.0f);
-          const double v = f(p);
-          s += v;
-          s2 += v * v / g.pdf(p);
-        }
-    const double box = 8.0 * double(half.x) * half.y * half.z, N = double(n) * n * n;
-    return (s2 * box / N) / ((s * box / N) * (s * box / N));
-  };
+  // The relative second moment over the peak's box (f is zero elsewhere): the upper half at the
+  // defensive density dominates the plain tree's.
+  auto second_moment = [&](const BoundaryOctree& g) { return relative_second_moment(g, f, peak - half, 2.0f * half, 64, rng); };
   const double v_plain = second_moment(plain), v_balanced = second_moment(balanced);
   MESSAGE("relative second moment: plain " << v_plain << ", with neighbour splits " << v_balanced);
   CHECK(v_balanced < 0.5 * v_plain);
