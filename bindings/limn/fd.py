@@ -1,4 +1,4 @@
-"""Central finite differences of whole renders, the reference for every derivative (design.md 5)."""
+"""Central finite differences of whole renders, the reference for every derivative (docs/derivatives.md, "How it is validated")."""
 from __future__ import annotations
 
 import hashlib

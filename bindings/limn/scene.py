@@ -257,7 +257,7 @@ class Scene:
         sample counts and guiding options do not apply): ``heightfield_mipmap=False`` searches
         discontinuities without the maximum mipmap (brute force, for comparison),
         ``heightfield_curvature_test=False`` skips mipmap nodes by their maximum height only (not
-        also by the second-derivative bound, core/heightfield/peak_search.h; for comparison), and
+        also by the second-derivative bound, core/geometry/shapes/heightfield/peak_search.h; for comparison), and
         ``theta_subrange`` > 0 searches only a sub-range of that many degrees per sample (App. C);
         ``heightfield_interval_mix`` (default 0.5) is the share of the choice of a theta interval
         made uniformly over the intervals, the rest proportional to their widths (0: widths only,

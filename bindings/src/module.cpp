@@ -9,12 +9,12 @@
 #include <exception>
 #include <functional>
 #include "core/diff/render_diff.h"
-#include "core/geometry/accel.h"
+#include "core/render/accel.h"
 #include "core/io/image_io.h"
 #include "core/io/mesh_io.h"
 #include "core/io/scene_loader.h"
 #include "core/optim/large_steps.h"
-#include "core/render/render.h"
+#include "core/render/integrators/render.h"
 
 namespace py = pybind11;
 using namespace limn;
@@ -272,8 +272,9 @@ PYBIND11_MODULE(_core, m) {
       .def("faces", [](const SceneHandle& s, const std::string& id) {
         for (const Shape& sh : s->shapes) {
           if (sh.id != id) continue;
-          if (!sh.is_mesh()) throw std::invalid_argument(s->source + ": shape '" + id + "' is a " + sh.type + ", not a mesh");
-          const Mesh& m = sh.mesh();
+          const Mesh* mesh = std::get_if<Mesh>(&sh.geometry);  // faces are a mesh's own parameter layout
+          if (!mesh) throw std::invalid_argument(s->source + ": shape '" + id + "' is a " + sh.type + ", not a mesh");
+          const Mesh& m = *mesh;
           py::array_t<int32_t> f({py::ssize_t(m.indices.size() / 3), py::ssize_t(3)});
           std::copy(m.indices.begin(), m.indices.end(), f.mutable_data());
           return f;
@@ -301,12 +302,6 @@ PYBIND11_MODULE(_core, m) {
         d["max_depth"] = s.integrator.max_depth;
         d["rr_depth"] = s.integrator.rr_depth;
         return d;
-      })
-      .def_property_readonly("triangle_count", [](const Scene& s) {
-        size_t n = 0;
-        for (const Shape& sh : s.shapes)
-          if (sh.is_mesh()) n += sh.mesh().triangle_count();
-        return n;
       });
 
   m.def("load_file", [](const std::string& path) { return SceneHandle(load_scene_file(path)); }, py::arg("path"),

@@ -2,8 +2,8 @@
 // (PNG, JPEG) are sRGB-encoded on disk and converted on the way in and out.
 #pragma once
 #include <string>
-#include "core/render/render.h"
-#include "core/render/texture.h"
+#include "core/render/integrators/render.h"
+#include "core/render/textures/texture.h"
 
 namespace limn {
 

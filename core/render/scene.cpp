@@ -14,10 +14,7 @@ void Scene::build() {
     if (std::holds_alternative<ConstantEmitter>(emitters[i].model) || std::holds_alternative<EnvmapEmitter>(emitters[i].model))
       infinite_emitters.push_back(int(i));
   }
-  for (Shape& s : shapes) {
-    if (s.is_mesh()) s.mesh().update_derived();
-    if (s.is_heightfield()) s.heightfield().build_mipmap();
-  }
+  for (Shape& s : shapes) s.visit([](auto& g) { g.build_derived(); });
   m_accel = std::make_unique<Accel>(shapes);
   collect_parameters();
   m_snapshots.clear();
@@ -28,18 +25,8 @@ void Scene::collect_parameters() {
   m_params.clear();
   for (size_t i = 0; i < shapes.size(); ++i) {
     Shape& s = shapes[i];
-    if (s.is_mesh()) {
-      Mesh& m = s.mesh();
-      m_params.push_back({s.id + ".vertex_positions", Parameter::Kind::VertexPositions, int(i), m.positions.data(), {m.vertex_count(), 3}});
-    } else if (s.is_heightfield()) {
-      Heightfield& hf = s.heightfield();
-      m_params.push_back({s.id + ".heights", Parameter::Kind::Heights, int(i), hf.heights.data(), {size_t(hf.ny), size_t(hf.nx)}});
-    } else {
-      Sphere& sp = s.sphere();
-      m_params.push_back({s.id + ".center", Parameter::Kind::SphereCenter, int(i), &sp.center.x, {3}});
-      m_params.push_back({s.id + ".radius", Parameter::Kind::SphereRadius, int(i), &sp.radius, {}});
-    }
-    m_params.push_back({s.id + ".to_world.translation", Parameter::Kind::Translation, int(i), &s.translation.x, {3}});
+    s.visit([&](auto& g) { g.list_parameters(s.id, int(i), m_params); });
+    m_params.push_back({s.id + ".to_world.translation", Parameter::Kind::Translation, int(i), &s.translation.x, {3}, true});
   }
   for (size_t i = 0; i < bsdfs.size(); ++i) {
     Bsdf& b = bsdfs[i];
@@ -76,37 +63,19 @@ const Parameter* Scene::find_parameter(const std::string& name) const {
   return nullptr;
 }
 
-namespace {
-std::string format_values(const float* v, size_t n) {
-  std::ostringstream s;
-  s << "[";
-  for (size_t i = 0; i < n; ++i) s << (i ? ", " : "") << v[i];
-  s << "]";
-  return s.str();
-}
-}  // namespace
-
 void Scene::validate_parameter(const Parameter& p) const {
   const std::string where = source + ": parameter '" + p.name + "'";
   const size_t n = p.size();
+  if (p.geometric && p.kind != Parameter::Kind::Translation) {  // the shape's own parameters
+    shapes[p.index].visit([&](const auto& g) { g.validate_parameter(p, where); });
+    return;
+  }
   switch (p.kind) {
-    case Parameter::Kind::VertexPositions:
-    case Parameter::Kind::SphereCenter:
     case Parameter::Kind::Translation:
       for (size_t i = 0; i < n; i += 3)
         if (!std::isfinite(p.data[i]) || !std::isfinite(p.data[i + 1]) || !std::isfinite(p.data[i + 2]))
-          throw std::invalid_argument(where + ": " + (p.kind == Parameter::Kind::SphereCenter ? "center" : "vertex " + std::to_string(i / 3)) +
-                                      " is not finite (" + format_values(p.data + i, 3) + ")");
+          throw std::invalid_argument(where + ": vertex " + std::to_string(i / 3) + " is not finite (" + format_values(p.data + i, 3) + ")");
       break;
-    case Parameter::Kind::Heights: {
-      const int nx = shapes[p.index].heightfield().nx;
-      for (size_t i = 0; i < n; ++i)
-        if (!std::isfinite(p.data[i]))
-          throw std::invalid_argument(where + ": height at row " + std::to_string(i / nx) + ", column " + std::to_string(i % nx) +
-                                      " is not finite (" + std::to_string(p.data[i]) + ")");
-      break;
-    }
-    case Parameter::Kind::SphereRadius:
     case Parameter::Kind::Alpha:
       if (!(std::isfinite(p.data[0]) && p.data[0] > 0.0f))
         throw std::invalid_argument(where + ": must be finite and > 0 (got " + std::to_string(p.data[0]) + ")");
@@ -117,30 +86,17 @@ void Scene::validate_parameter(const Parameter& p) const {
         if (!(std::isfinite(p.data[i]) && p.data[i] >= 0.0f))
           throw std::invalid_argument(where + ": entry " + std::to_string(i) + " must be finite and >= 0 (got " + std::to_string(p.data[i]) + ")");
       break;
+    default:  // a shape kind's own parameters, validated by the shape above
+      break;
   }
 }
 
 void Scene::apply_parameter(const Parameter& p) {
-  switch (p.kind) {
-    case Parameter::Kind::VertexPositions:
-      shapes[p.index].mesh().update_derived();
-      m_accel->shape_changed(p.index);
-      break;
-    case Parameter::Kind::Heights:
-      shapes[p.index].heightfield().update_mipmap();  // only the cells around changed heights
-      m_accel->shape_changed(p.index);
-      break;
-    case Parameter::Kind::SphereCenter:
-    case Parameter::Kind::SphereRadius:
-      m_accel->shape_changed(p.index);
-      break;
-    case Parameter::Kind::Translation:
-      break;  // applied in update(), which knows the previous value
-    case Parameter::Kind::Reflectance:
-    case Parameter::Kind::Alpha:
-    case Parameter::Kind::EmitterValue:
-      break;  // read directly by the renderer; nothing derived
-  }
+  // Translation is applied in update(), which knows the previous value; materials and emitters
+  // are read directly by the renderer and have nothing derived.
+  if (!p.geometric || p.kind == Parameter::Kind::Translation) return;
+  shapes[p.index].visit([&](auto& g) { g.apply_parameter(p); });
+  m_accel->shape_changed(p.index);
 }
 
 std::vector<std::string> Scene::update() {
@@ -165,20 +121,14 @@ std::vector<std::string> Scene::update() {
   std::vector<std::string> names;
   for (size_t i : changed) {
     if (m_params[i].kind == Parameter::Kind::Translation) {
-      // Move the geometry by the change of the translation; its positions (or centre) parameter
-      // then holds the moved values, and its snapshot follows so the move is not seen twice.
+      // Move the geometry by the change of the translation; its own parameters (positions, centre)
+      // then hold the moved values, and their snapshots follow so the move is not seen twice.
       const Parameter& p = m_params[i];
       const Vec3 delta = Vec3(p.data[0], p.data[1], p.data[2]) - Vec3(m_snapshots[i][0], m_snapshots[i][1], m_snapshots[i][2]);
-      Shape& sh = shapes[p.index];
-      if (sh.is_heightfield()) {
-        Heightfield& hf = sh.heightfield();
-        hf.world_from_local = Transform::translate(Vec3d(delta)) * hf.world_from_local;
-        m_accel->shape_changed(p.index);
-      }
-      const Parameter::Kind target = sh.is_mesh() ? Parameter::Kind::VertexPositions : Parameter::Kind::SphereCenter;
+      shapes[p.index].visit([&](auto& g) { g.translate(delta); });
+      m_accel->shape_changed(p.index);
       for (size_t j = 0; j < m_params.size(); ++j)
-        if (m_params[j].kind == target && m_params[j].index == p.index) {
-          for (size_t k = 0; k < m_params[j].size(); ++k) m_params[j].data[k] += delta[int(k % 3)];
+        if (m_params[j].geometric && m_params[j].kind != Parameter::Kind::Translation && m_params[j].index == p.index) {
           apply_parameter(m_params[j]);
           std::memcpy(m_snapshots[j].data(), m_params[j].data, m_snapshots[j].size() * sizeof(float));
         }
@@ -186,8 +136,7 @@ std::vector<std::string> Scene::update() {
     }
     apply_parameter(m_params[i]);
     std::memcpy(m_snapshots[i].data(), m_params[i].data, m_snapshots[i].size() * sizeof(float));
-    geometry |= m_params[i].kind == Parameter::Kind::VertexPositions || m_params[i].kind == Parameter::Kind::SphereCenter ||
-                m_params[i].kind == Parameter::Kind::SphereRadius || m_params[i].kind == Parameter::Kind::Heights;
+    geometry |= m_params[i].geometric;
     names.push_back(m_params[i].name);
   }
   if (geometry) m_accel->commit();

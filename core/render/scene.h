@@ -5,7 +5,7 @@
 #include <shared_mutex>
 #include <string>
 #include <vector>
-#include "core/geometry/accel.h"
+#include "core/render/accel.h"
 #include "core/render/bsdfs/bsdf.h"
 #include "core/render/camera.h"
 #include "core/render/emitters/emitter.h"
@@ -24,21 +24,6 @@ struct IntegratorSettings {
   // / bsdf_samples; only 0 or 1 sample per strategy is supported).
   bool emitter_sampling = true;
   bool bsdf_sampling = true;
-};
-
-// An editable parameter: a float view into scene memory plus what must happen when it changes.
-struct Parameter {
-  enum class Kind { VertexPositions, SphereCenter, SphereRadius, Heights, Translation, Reflectance, Alpha, EmitterValue };
-  std::string name;            // "<owner id>.<field>"
-  Kind kind;
-  int index;                   // shape, bsdf or emitter index
-  float* data;
-  std::vector<size_t> shape;   // numpy-style shape; empty for a scalar
-  size_t size() const {
-    size_t n = 1;
-    for (size_t s : shape) n *= s;
-    return n;
-  }
 };
 
 class Scene {

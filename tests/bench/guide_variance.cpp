@@ -23,7 +23,7 @@
 #include <string>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include "core/diff/indirect.h"
+#include "core/diff/terms/indirect.h"
 #include "core/diff/render_diff.h"
 #include "core/guiding/grid.h"
 #include "core/guiding/mixture.h"

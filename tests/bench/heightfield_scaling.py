@@ -143,7 +143,7 @@ def main() -> None:
              "gradient buffers of one double per height) of the forward pass (`Scene.render`, the path tracer "
              "through the mipmap ray traversal) and of the backward pass (`render_backward` with the heightfield "
              "estimator: peak search per slice, taped path, reverse sweep) with the maximum-mipmap peak search "
-             "and its curvature tests (core/heightfield/peak_search.h, the default), with the mipmap's maximum test "
+             "and its curvature tests (core/geometry/shapes/heightfield/peak_search.h, the default), with the mipmap's maximum test "
              "alone (the paper's Algorithm 1, `heightfield_curvature_test=False`), and with the brute-force search that "
              "samples every cell along each slice. `cells` is the number of level-0 cells the search sampled per "
              "camera sample.", "",

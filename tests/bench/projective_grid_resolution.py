@@ -1,4 +1,4 @@
-"""Grid resolution and the projective-sampling gain (issue 5's 8.1x target): the path-space
+"""Grid resolution and the projective-sampling gain (the paper's 8.1x of Figure 1): the path-space
 baseline grid (uniform points per cell) and the projective grid at several resolutions on the
 projective test scenes, in one run, against the cached finite-difference references of
 `python3 -m limn bench`. The paper's Figure 10 uses one fixed 10000 x 100 x 100 grid for both;

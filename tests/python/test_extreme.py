@@ -1,4 +1,4 @@
-"""Stiff and extreme cases of the primal renderer (design.md section 7): no NaN/Inf, bounded error."""
+"""Stiff and extreme cases of the primal renderer (docs/testing.md, "extreme cases"): no NaN/Inf, bounded error."""
 from __future__ import annotations
 
 import copy

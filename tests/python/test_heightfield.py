@@ -213,7 +213,7 @@ def test_backward_matches_forward():
 
 @pytest.mark.parametrize("kind", ["flat", "cliff", "spikes", "tiny", "huge"])
 def test_stiff_fields_give_finite_derivatives(kind):
-    """design.md 7: perfectly flat fields (the search's worst case), cliffs, single-texel spikes,
+    """Stiff fields (docs/heightfields.md): perfectly flat fields (the search's worst case), cliffs, single-texel spikes,
     and coordinates at 1e-4 and 1e4 scale: no NaN or Inf in images or gradients."""
     d = scene_dict("cone")
     h = np.zeros((33, 33), np.float32)

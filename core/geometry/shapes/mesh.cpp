@@ -4,6 +4,7 @@
 #include <array>
 #include <cstring>
 #include <map>
+#include <stdexcept>
 #include <unordered_map>
 #include "core/math/warp.h"
 
@@ -184,6 +185,47 @@ PositionSample Mesh::sample_position(const Vec2& u, float u_tri) const {
   fill_interaction(int(prim), b.x, b.y, si);
   // P(triangle) = area_f / total, then uniform on it: pdf_area = 1 / total_area.
   return PositionSample{si.p, si.ng, si.uv, total_area > 0.0f ? 1.0f / total_area : 0.0f, int(prim), b};
+}
+
+RTCGeometry Mesh::create_embree_geometry(RTCDevice device) const {
+  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  // Embree-owned buffers (padded as Embree requires); our copy stays the one users edit.
+  rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertex_count());
+  auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                             3 * sizeof(uint32_t), triangle_count()));
+  std::memcpy(idx, indices.data(), indices.size() * sizeof(uint32_t));
+  update_embree_geometry(g);
+  // Vertices move during optimisation: refit the BVH instead of rebuilding it.
+  rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_REFIT);
+  return g;
+}
+
+void Mesh::update_embree_geometry(RTCGeometry g) const {
+  auto* dst = static_cast<float*>(rtcGetGeometryBufferData(g, RTC_BUFFER_TYPE_VERTEX, 0));
+  std::memcpy(dst, positions.data(), positions.size() * sizeof(float));
+  rtcUpdateGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0);
+}
+
+void Mesh::list_parameters(const std::string& id, int index, std::vector<Parameter>& out) {
+  out.push_back({id + ".vertex_positions", Parameter::Kind::VertexPositions, index, positions.data(), {vertex_count(), 3}, true});
+}
+
+void Mesh::validate_parameter(const Parameter& p, const std::string& where) const {
+  for (size_t i = 0; i < p.size(); i += 3)
+    if (!std::isfinite(p.data[i]) || !std::isfinite(p.data[i + 1]) || !std::isfinite(p.data[i + 2]))
+      throw std::invalid_argument(where + ": vertex " + std::to_string(i / 3) + " is not finite (" + format_values(p.data + i, 3) + ")");
+}
+
+void Mesh::translate(const Vec3& delta) {
+  for (size_t k = 0; k < positions.size(); ++k) positions[k] += delta[int(k % 3)];
+}
+
+void Mesh::geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const {
+  values.insert(values.end(), positions.begin(), positions.end());
+  for (size_t v = 0; v < vertex_count(); ++v) {
+    lo = glm::min(lo, vertex(uint32_t(v)));
+    hi = glm::max(hi, vertex(uint32_t(v)));
+  }
 }
 
 std::vector<uint32_t> weld_by_position(const std::vector<float>& positions, const std::vector<uint32_t>& indices,

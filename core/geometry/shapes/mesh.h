@@ -1,8 +1,10 @@
 // Triangle mesh in world space. Vertices are welded by position, so edges shared by two triangles
 // are adjacent even across UV seams; texture coordinates are kept per triangle corner.
 #pragma once
+#include <embree3/rtcore.h>
 #include <string>
 #include <vector>
+#include "core/geometry/parameter.h"
 #include "core/geometry/ray.h"
 #include "core/math/distribution.h"
 
@@ -27,6 +29,9 @@ struct MeshEdge {
 };
 
 struct Mesh {
+  static constexpr const char* kind_name = "mesh";
+  static constexpr bool can_emit = true;
+
   std::vector<float> positions;      // 3 floats per vertex, world space (differentiable later)
   std::vector<uint32_t> indices;     // 3 per triangle
   std::vector<float> corner_uvs;     // 6 floats per triangle (may be empty)
@@ -75,7 +80,25 @@ struct Mesh {
   void orient();  // fills `orientation` from the edges (called by update_derived)
   // Surface record at barycentrics (b1, b2) of triangle `prim`.
   void fill_interaction(int prim, float b1, float b2, SurfaceInteraction& si) const;
+
+  // ---- the shape interface (core/geometry/shapes/shape.h) ----
+  void build_derived() { update_derived(); }  // once after loading
+  // Embree triangle geometry with its own vertex buffer, refit when the vertices move.
+  RTCGeometry create_embree_geometry(RTCDevice device) const;
+  void update_embree_geometry(RTCGeometry g) const;  // uploads the vertices
+  // Embree's hit (triangle prim, barycentrics uv) as a surface record.
+  void fill_hit(const Ray& ray, float t, unsigned prim, const Vec2& uv, SurfaceInteraction& si) const {
+    fill_interaction(int(prim), uv.x, uv.y, si);
+  }
+  float area() const { return total_area; }
   PositionSample sample_position(const Vec2& u, float u_tri) const;
+  // "<id>.vertex_positions" (N x 3, world space).
+  void list_parameters(const std::string& id, int index, std::vector<Parameter>& out);
+  void validate_parameter(const Parameter& p, const std::string& where) const;
+  void apply_parameter(const Parameter& p) { update_derived(); }
+  void translate(const Vec3& delta);
+  // Values whose change means the surface moved, and their bounding box (guide reuse).
+  void geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const;
 };
 
 // Welds vertices with bitwise-equal positions; returns the new index buffer and fills `welded`.

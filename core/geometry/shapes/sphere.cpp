@@ -1,5 +1,7 @@
 #include "core/geometry/shapes/sphere.h"
 
+#include <stdexcept>
+#include "core/geometry/embree_user.h"
 #include "core/math/warp.h"
 
 namespace limn {
@@ -45,11 +47,42 @@ void Sphere::fill_interaction(const Vec3& p_hit, SurfaceInteraction& si) const {
   si.frame = Frame(si.ns);
 }
 
-PositionSample Sphere::sample_position(const Vec2& u) const {
+PositionSample Sphere::sample_position(const Vec2& u, float) const {
   const Vec3 n = warp::square_to_uniform_sphere(u);
   SurfaceInteraction si;
   fill_interaction(center + radius * n, si);
   return PositionSample{si.p, si.ng, si.uv, 1.0f / area(), 0, si.uv};
+}
+
+namespace {
+void sphere_bounds(const RTCBoundsFunctionArguments* args) {
+  const Sphere& s = *static_cast<const Sphere*>(args->geometryUserPtr);
+  // Widened by a few ulps: the box is rounded to float, the intersector works in double.
+  const float r = s.radius * (1.0f + 1e-6f) + 1e-6f * max_component(glm::abs(s.center));
+  embree_user::set_bounds(args->bounds_o, s.center - Vec3(r), s.center + Vec3(r));
+}
+}  // namespace
+
+RTCGeometry Sphere::create_embree_geometry(RTCDevice device) const { return embree_user::new_geometry(device, *this, sphere_bounds); }
+
+void Sphere::list_parameters(const std::string& id, int index, std::vector<Parameter>& out) {
+  out.push_back({id + ".center", Parameter::Kind::SphereCenter, index, &center.x, {3}, true});
+  out.push_back({id + ".radius", Parameter::Kind::SphereRadius, index, &radius, {}, true});
+}
+
+void Sphere::validate_parameter(const Parameter& p, const std::string& where) const {
+  if (p.kind == Parameter::Kind::SphereCenter) {
+    if (!std::isfinite(p.data[0]) || !std::isfinite(p.data[1]) || !std::isfinite(p.data[2]))
+      throw std::invalid_argument(where + ": center is not finite (" + format_values(p.data, 3) + ")");
+  } else if (!(std::isfinite(p.data[0]) && p.data[0] > 0.0f)) {
+    throw std::invalid_argument(where + ": must be finite and > 0 (got " + std::to_string(p.data[0]) + ")");
+  }
+}
+
+void Sphere::geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const {
+  values.insert(values.end(), {center.x, center.y, center.z, radius});
+  lo = glm::min(lo, center - Vec3(radius));
+  hi = glm::max(hi, center + Vec3(radius));
 }
 
 }  // namespace limn

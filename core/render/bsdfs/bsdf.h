@@ -10,7 +10,7 @@
 #include <string>
 #include <variant>
 #include "core/render/bsdfs/microfacet.h"
-#include "core/render/texture.h"
+#include "core/render/textures/texture.h"
 
 namespace limn {
 

@@ -5,10 +5,10 @@
 #include <string>
 #include <variant>
 #include <vector>
-#include "core/geometry/shape.h"
+#include "core/geometry/shapes/shape.h"
 #include "core/geometry/transform.h"
 #include "core/math/distribution.h"
-#include "core/render/texture.h"
+#include "core/render/textures/texture.h"
 
 namespace limn {
 

@@ -2,7 +2,10 @@
 // measure of the space, silhouette conditions hold, and delta-light points graze the boundary.
 #include <doctest/doctest.h>
 
-#include "core/diff/boundary_space.h"
+#include "tests/cpp/test_util.h"
+
+#include "core/diff/terms/boundary_space.h"
+#include "core/diff/shapes/mesh.h"
 #include "core/io/scene_loader.h"
 #include "core/math/rng.h"
 #include "core/math/warp.h"
@@ -15,6 +18,16 @@
 using namespace limn;
 
 namespace {
+
+// Segments of each part of Eq. 4: mesh edges are the perimeter part, sphere surfaces the interior.
+size_t count(const BoundarySpace& space, BoundaryPart part) {
+  size_t n = 0;
+  for (const BoundarySegment& s : space.segments()) n += s.part == part;
+  return n;
+}
+const MeshEdge& edge_of(const Scene& scene, const BoundarySegment& s) {
+  return test::geometry<Mesh>(scene, size_t(s.shape)).edges[size_t(s.local)];
+}
 
 std::unique_ptr<Scene> cube_and_ball() {
   const std::string text = R"({
@@ -33,8 +46,8 @@ TEST_CASE("boundary space: sample and invert round-trip, pdf matches the measure
   auto scene = cube_and_ball();
   const DiffParams params(*scene, {"box.vertex_positions", "ball.center"});
   const BoundarySpace space(*scene, params);
-  CHECK(space.edge_count() == 12);  // the cube's 12 convex edges; the diagonals are flat
-  CHECK(space.sphere_count() == 1);
+  CHECK(count(space, BoundaryPart::Perimeter) == 12);  // the cube's 12 convex edges; the diagonals are flat
+  CHECK(count(space, BoundaryPart::Interior) == 1);
 
   Pcg32 rng(11);
   const int n = 200000;
@@ -46,7 +59,7 @@ TEST_CASE("boundary space: sample and invert round-trip, pdf matches the measure
     if (!space.sample(u, 1.0f, p)) continue;
     ++ok;
     const BoundarySegment& s = space.segments()[size_t(p.segment)];
-    (s.kind == BoundarySegment::Kind::MeshEdge ? inv_pdf_edges : inv_pdf_sphere) += 1.0 / p.pdf;
+    (s.part == BoundaryPart::Perimeter ? inv_pdf_edges : inv_pdf_sphere) += 1.0 / p.pdf;
     CHECK(std::abs(glm::length(p.w) - 1.0f) < 1e-5f);
     CHECK(std::abs(glm::dot(p.n_b, p.w)) < 1e-5f);  // n_b is perpendicular to the boundary ray
     const Vec3 back = space.invert(p.segment, p.xb, p.w);
@@ -55,7 +68,7 @@ TEST_CASE("boundary space: sample and invert round-trip, pdf matches the measure
     CHECK(q.segment == p.segment);
     CHECK(glm::length(q.xb - p.xb) < 1e-5f);
     CHECK(glm::length(q.w - p.w) < 1e-4f);
-    if (s.kind == BoundarySegment::Kind::SphereSurface) {
+    if (s.part == BoundaryPart::Interior) {
       CHECK(std::abs(glm::dot(p.xb - Vec3(-1, 0.5, 0.2), p.w)) < 1e-5f);  // tangent to the sphere
       CHECK(p.jacobian == doctest::Approx(1.0 / 0.7));
     }
@@ -74,7 +87,7 @@ TEST_CASE("boundary space: delta-light points graze the boundary") {
   auto scene = cube_and_ball();
   const DiffParams params(*scene, {"ball.radius"});
   const BoundarySpace space(*scene, params);
-  REQUIRE(space.sphere_count() == 1);
+  REQUIRE(count(space, BoundaryPart::Interior) == 1);
   CHECK(space.static_count() == 12);  // the cube does not move, its edges take part
   for (const Emitter& light : scene->emitters) {
     Pcg32 rng(5);
@@ -83,7 +96,7 @@ TEST_CASE("boundary space: delta-light points graze the boundary") {
     for (int i = 0; i < n; ++i) {
       BoundaryPoint p;
       const bool ok = space.sample_delta(rng.next_float(), 1.0f, light, p);
-      if (space.segments()[size_t(p.segment)].kind == BoundarySegment::Kind::MeshEdge) continue;  // the static cube
+      if (space.segments()[size_t(p.segment)].part == BoundaryPart::Perimeter) continue;  // the static cube
       REQUIRE(ok);
       const Vec3 normal = (p.xb - Vec3(-1, 0.5, 0.2)) / 0.7f;
       CHECK(std::abs(glm::length(normal) - 1.0f) < 1e-5f);
@@ -130,8 +143,8 @@ TEST_CASE("boundary space: edges follow each other in space, whatever the mesh's
   auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
   const DiffParams params(*scene, {"sheet.vertex_positions"});
   const BoundarySpace space(*scene, params);
-  const Mesh& m = scene->shapes[0].mesh();
-  REQUIRE(space.edge_count() > 500);
+  const Mesh& m = test::geometry<Mesh>(*scene, 0);
+  REQUIRE(count(space, BoundaryPart::Perimeter) > 500);
   // Median extent (in x, y) of 32 consecutive edge midpoints of an edge sequence.
   auto median_extent = [&](const std::vector<std::pair<uint32_t, uint32_t>>& edges) {
     std::vector<float> extents;
@@ -148,7 +161,7 @@ TEST_CASE("boundary space: edges follow each other in space, whatever the mesh's
     return extents[extents.size() / 2];
   };
   std::vector<std::pair<uint32_t, uint32_t>> in_space, in_face_order;
-  for (const BoundarySegment& seg : space.segments()) in_space.push_back({seg.a, seg.b});
+  for (const BoundarySegment& seg : space.segments()) in_space.push_back({edge_of(*scene, seg).a, edge_of(*scene, seg).b});
   for (const MeshEdge& e : m.edges) in_face_order.push_back({e.a, e.b});
   const float ordered = median_extent(in_space), listed = median_extent(in_face_order);
   MESSAGE("median extent of 32 consecutive edges: in the space ", ordered, ", in face order ", listed);
@@ -165,7 +178,7 @@ TEST_CASE("mesh edges: a duplicated triangle counts once, in either winding") {
             "vertex_positions": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.5, -1, -1], [-1, 1, 1]],
             "faces": [[0, 2, 1], [0, 1, 3], [1, 0, 3], [0, 3, 2], [1, 2, 3], [0, 1, 4], [3, 2, 5], [0, 1, 4], [2, 3, 5]]}})";
   auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
-  const Mesh& m = scene->shapes[0].mesh();
+  const Mesh& m = test::geometry<Mesh>(*scene, 0);
   CHECK(m.edges.size() == 10);
   CHECK(m.edge_more_faces.size() == 2);
   for (const MeshEdge& e : m.edges) {
@@ -200,7 +213,7 @@ TEST_CASE("mesh orientation: flipped and duplicated triangles turned to agree, c
       "m": {"type": "mesh", "vertex_positions": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1],
                                                  [3, 0, 0], [4, 0, 0], [3, 1, 0.2], [4, 1, 0], [3.5, 2, 0]], "faces": )" + f.dump() + "}}";
     auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
-    const Mesh& m = scene->shapes[0].mesh();
+    const Mesh& m = test::geometry<Mesh>(*scene, 0);
     REQUIRE(m.orientation.size() == faces.size());
     const Vec3d centroid(0.25, 0.25, 0.25);
     for (int t = 0; t < 4; ++t) CHECK(glm::dot(m.oriented_normal(t), Vec3d(m.vertex(m.indices[3 * t])) - centroid) > 0.0);
@@ -231,7 +244,7 @@ TEST_CASE("boundary space: a non-manifold edge is a silhouette only where its tr
   auto scene = load_scene_dict(nlohmann::json::parse(text), "<test>", ".");
   const DiffParams params(*scene, {"fins.vertex_positions"});
   const BoundarySpace space(*scene, params);
-  const Mesh& m = scene->shapes[0].mesh();
+  const Mesh& m = test::geometry<Mesh>(*scene, 0);
   const std::array<Vec3, 3> fin{m.vertex(2), m.vertex(3), m.vertex(4)};
   Pcg32 rng(5);
   int on_edge = 0, silhouettes = 0, expected_silhouettes = 0;
@@ -240,7 +253,7 @@ TEST_CASE("boundary space: a non-manifold edge is a silhouette only where its tr
     BoundaryPoint p;
     const bool ok = space.sample(u, 1.0f, p);
     const BoundarySegment& s = space.segments()[size_t(p.segment)];
-    if (!(s.a == 0 && s.b == 1)) continue;
+    if (!(edge_of(*scene, s).a == 0 && edge_of(*scene, s).b == 1)) continue;
     ++on_edge;
     const Vec3 w = warp::square_to_uniform_sphere(Vec2(u.y, u.z));
     const Vec3 n = glm::normalize(glm::cross(Vec3(0, 0, 1), w));

@@ -6,7 +6,7 @@
 // at image level in tests/python/test_derivatives.py.)
 #include <doctest/doctest.h>
 
-#include "core/diff/interior.h"
+#include "core/diff/terms/interior.h"
 #include "core/io/scene_loader.h"
 
 using namespace limn;

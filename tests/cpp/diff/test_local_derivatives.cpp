@@ -3,7 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <functional>
-#include "core/diff/local_derivatives.h"
+#include "core/diff/ad/local_derivatives.h"
 #include "core/math/rng.h"
 #include "core/render/bsdfs/bsdf.h"
 #include "core/render/bsdfs/fresnel.h"

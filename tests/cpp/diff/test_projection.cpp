@@ -3,48 +3,16 @@
 // and stay finite on open, non-manifold and sliver meshes.
 #include <doctest/doctest.h>
 
+#include "tests/cpp/test_util.h"
+
 #include <sstream>
-#include "core/diff/projection.h"
+#include "core/diff/terms/projection.h"
 #include "core/io/scene_loader.h"
 #include "core/math/warp.h"
 
 using namespace limn;
 
 namespace {
-
-// A latitude-longitude sphere of radius r with bumps (JUMP and WALK have work to do), as JSON.
-std::string bumpy_sphere_json(int nu, int nv, float r, float bump) {
-  std::ostringstream v, f;
-  v << "[";
-  int count = 0;
-  auto vertex = [&](float theta, float phi) {
-    const float rr = r * (1.0f + bump * std::sin(5.0f * phi) * std::sin(3.0f * theta));
-    v << (count++ ? "," : "") << "[" << rr * std::sin(theta) * std::cos(phi) << "," << rr * std::sin(theta) * std::sin(phi)
-      << "," << rr * std::cos(theta) << "]";
-  };
-  vertex(0.0f, 0.0f);  // north pole: 0
-  for (int i = 1; i < nv; ++i)
-    for (int j = 0; j < nu; ++j) vertex(kPi * i / nv, 2.0f * kPi * j / nu);
-  vertex(kPi, 0.0f);  // south pole: last
-  v << "]";
-  const int south = count - 1;
-  auto ring = [&](int i, int j) { return 1 + (i - 1) * nu + (j % nu); };
-  f << "[";
-  bool first = true;
-  auto tri = [&](int a, int b, int c) {
-    f << (first ? "" : ",") << "[" << a << "," << b << "," << c << "]";
-    first = false;
-  };
-  for (int j = 0; j < nu; ++j) tri(0, ring(1, j), ring(1, j + 1));
-  for (int i = 1; i < nv - 1; ++i)
-    for (int j = 0; j < nu; ++j) {
-      tri(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
-      tri(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
-    }
-  for (int j = 0; j < nu; ++j) tri(south, ring(nv - 1, j + 1), ring(nv - 1, j));
-  f << "]";
-  return R"({"type": "mesh", "face_normals": true, "vertex_positions": )" + v.str() + R"(, "faces": )" + f.str() + "}";
-}
 
 std::unique_ptr<Scene> scene_with(const std::string& shapes) {
   const std::string text = R"({"type": "scene", "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
@@ -84,14 +52,14 @@ Rates check_projections(const Scene& scene, const BoundarySpace& space, MeshProj
     // The boundary segment keeps the original direction where it can (x_a slides a little).
     CHECK(glm::dot(p->w, glm::normalize(xa - hit.p)) > 0.5f);
     const BoundarySegment& s = space.segments()[size_t(p->segment)];
-    if (s.kind == BoundarySegment::Kind::SphereSurface) {
-      const Sphere& sp = scene.shapes[s.shape].sphere();
+    if (const auto* sp_ptr = std::get_if<Sphere>(&scene.shapes[s.shape].geometry)) {
+      const Sphere& sp = *sp_ptr;
       CHECK(std::abs(glm::dot(glm::normalize(p->xb - sp.center), p->w)) < 1e-4f);  // tangent
       // On the silhouette seen from xa itself, too (Listing 1).
       CHECK(std::abs(glm::dot(glm::normalize(p->xb - sp.center), glm::normalize(p->xb - xa))) < 1e-4f);
-    } else if (s.face1 >= 0) {
-      const Mesh& m = scene.shapes[s.shape].mesh();
-      const double s0 = glm::dot(m.face_normal(s.face0), Vec3d(p->w)), s1 = glm::dot(m.face_normal(s.face1), Vec3d(p->w));
+    } else if (const MeshEdge& e = test::geometry<Mesh>(scene, size_t(s.shape)).edges[size_t(s.local)]; e.face_count == 2) {
+      const Mesh& m = test::geometry<Mesh>(scene, size_t(s.shape));
+      const double s0 = glm::dot(m.face_normal(e.face0), Vec3d(p->w)), s1 = glm::dot(m.face_normal(e.face1), Vec3d(p->w));
       CHECK(s0 * s1 < 0.0);  // one face towards w, the other away: a true silhouette for the ray
     }
   }
@@ -111,7 +79,7 @@ TEST_CASE("projection: spheres land on the silhouette seen from the segment orig
 
 TEST_CASE("projection: meshes (WALK, JUMP, hybrid) find true silhouettes on smooth and bumpy spheres") {
   for (const float bump : {0.0f, 0.08f}) {
-    auto scene = scene_with(R"("blob": )" + bumpy_sphere_json(40, 20, 0.8f, bump));
+    auto scene = scene_with(R"("blob": )" + test::bumpy_sphere_json(40, 20, 0.8f, bump));
     const DiffParams params(*scene, {"blob.vertex_positions"});
     const BoundarySpace space(*scene, params);
     double found[3];
@@ -168,14 +136,15 @@ TEST_CASE("projection: on a box corner with two silhouette edges, hits go to the
             "faces": )") + faces + "}");
   const DiffParams params(*scene, {"box.vertex_positions"});
   const BoundarySpace space(*scene, params);
-  const Mesh& m = scene->shapes[0].mesh();
+  const Mesh& m = test::geometry<Mesh>(*scene, 0);
   for (const MeshProjection mode : {MeshProjection::Walk, MeshProjection::Hybrid}) {
     CAPTURE(int(mode));
     const Projector proj(*scene, space, mode);
     const Vec3 xa(-1.5f, -2.0f, -1.0f);
     auto edge_of = [&](const Projection& p) {
       const BoundarySegment& s = space.segments()[size_t(p.segment)];
-      const Vec3 a = m.vertex(s.a), b = m.vertex(s.b);
+      const MeshEdge& e = m.edges[size_t(s.local)];
+      const Vec3 a = m.vertex(e.a), b = m.vertex(e.b);
       if (a.x == -0.5f && b.x == -0.5f && a.y == 0.5f && b.y == 0.5f) return std::string("back-left");
       if (a.x == -0.5f && b.x == -0.5f && a.z == 1.7f && b.z == 1.7f) return std::string("top-left");
       return std::string("other");

@@ -2,7 +2,9 @@
 // Embree's error callback, transforms.
 #include <doctest/doctest.h>
 
-#include "core/geometry/accel.h"
+#include "tests/cpp/test_util.h"
+
+#include "core/render/accel.h"
 #include "core/geometry/transform.h"
 #include "core/math/rng.h"
 #include "core/math/warp.h"
@@ -64,13 +66,14 @@ TEST_CASE("accel: triangle and sphere hits through Embree") {
   CHECK_FALSE(accel.intersect(Ray{Vec3(3, 3, -1), Vec3(0, 0, 1)}, si));
 
   // Moving a shape and refitting.
-  shapes[1].sphere().center = Vec3(0, 0, 3);
+  test::geometry<Sphere>(shapes, 1).center = Vec3(0, 0, 3);
   accel.shape_changed(1);
   accel.commit();
   REQUIRE(accel.intersect(Ray{Vec3(0, 0, 5), Vec3(0, 0, -1)}, si));
   CHECK(si.t == doctest::Approx(1.5f));
-  shapes[0].mesh().positions[2] = shapes[0].mesh().positions[5] = shapes[0].mesh().positions[8] = shapes[0].mesh().positions[11] = -1.0f;
-  shapes[0].mesh().update_derived();
+  Mesh& floor = test::geometry<Mesh>(shapes, 0);
+  floor.positions[2] = floor.positions[5] = floor.positions[8] = floor.positions[11] = -1.0f;
+  floor.update_derived();
   accel.shape_changed(0);
   accel.commit();
   REQUIRE(accel.intersect(Ray{Vec3(0.25f, -0.5f, -3), Vec3(0, 0, 1)}, si));

@@ -1,0 +1,79 @@
+#include "core/diff/terms/primary.h"
+
+#include "core/diff/ad/film_projection.h"
+#include "core/diff/ad/local_derivatives.h"
+#include "core/diff/shapes/all.h"
+#include "core/render/integrators/path.h"
+
+namespace limn {
+namespace {
+
+using ad::Var;
+using VV = ad::V3<Var>;
+using Vec2d = glm::dvec2;
+
+// Offset of the two radiance probes from the curve, in pixels: far above the float resolution of
+// camera ray directions (~4e-5 px at 256 px across 40 degrees), far below any image feature.
+constexpr double kProbeOffset = 1e-3;
+
+}  // namespace
+
+PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, int max_depth)
+    : m_scene(scene), m_params(params), m_max_depth(max_depth) {
+  const CameraView view(scene.camera);
+  for (int si : params.moving_shapes())
+    with_group<CameraSilhouettes>(scene, si, "camera silhouettes",
+                                  [&](auto group, const auto& g) { group.append(scene, g, si, view, m_curves, m_skipped); });
+  std::vector<float> weights;
+  for (const SilhouetteCurve& c : m_curves) weights.push_back(c.weight);
+  if (!weights.empty()) m_select = Distribution1D(weights);
+}
+
+bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& delta_L, Var& normal_velocity,
+                             uint64_t& rays) const {
+  const CameraView view(m_scene.camera);
+  const FilmProjection& proj = view.proj;
+  const ad::V3<double>& eye = view.eye;
+  const size_t k = m_select.sample_discrete(rng.next_float());
+  const double pmf = m_select.pmf(k);
+  const float u = rng.next_float();
+  const SilhouetteCurve& c = m_curves[k];
+
+  VV P;                    // the curve point as a function of the parameters
+  ad::V3<double> dP;       // d(point)/d(curve parameter)
+  double pdf_param;        // density of the curve parameter
+  const DiffContext ctx{m_scene, m_params, in};
+  if (!with_group<CameraSilhouettes, bool>(m_scene, c.shape, "camera silhouettes", [&](auto group, const auto& g) {
+        return group.point(ctx, g, c, u, eye, P, dP, pdf_param);
+      }))
+    return false;
+
+  const ad::V3<Var> pc = proj.to_camera(P);
+  if (pc.z.v <= proj.near) return false;
+  Var fx, fy;
+  proj.film(pc, fx, fy);
+  if (!(fx.v >= 0 && fx.v < proj.W && fy.v >= 0 && fy.v < proj.H)) return false;
+  const Vec2d ds = proj.film_derivative(ad::values(pc), dP);
+  const double ds_len = glm::length(ds);
+  if (!(ds_len > 0.0)) return false;
+  const Vec2d n(-ds.y / ds_len, ds.x / ds_len);
+  const double pdf_length = pmf * pdf_param / ds_len;  // per unit of film length
+  pixel = int(fy.v) * int(proj.W) + int(fx.v);
+
+  // Radiance on both sides with the same random numbers.
+  PathCounters counters;
+  const Pcg32 rng_paths = rng;
+  Spectrum L[2];
+  for (int side = 0; side < 2; ++side) {
+    const double sign = side == 0 ? -1.0 : 1.0;
+    const Vec2 film(float(fx.v + sign * kProbeOffset * n.x), float(fy.v + sign * kProbeOffset * n.y));
+    Pcg32 r = rng_paths;
+    L[side] = path_radiance(m_scene, m_scene.camera.generate_ray(film), r, counters, PathLimits{m_max_depth, true});
+  }
+  rays += counters.rays;
+  delta_L = (L[0] - L[1]) / float(pdf_length);
+  normal_velocity = fx * Var(n.x) + fy * Var(n.y);
+  return is_finite(delta_L);
+}
+
+}  // namespace limn
