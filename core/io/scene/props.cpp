@@ -1,7 +1,9 @@
 #include "core/io/scene/props.h"
 
 #include <functional>
+#include <stdexcept>
 #include "core/io/image_io.h"
+#include "core/io/scene/shapes.h"
 
 namespace limn::io_detail {
 
@@ -12,18 +14,21 @@ std::string str_field(const json& j, const char* key, const std::string& def) {
 }
 
 const std::map<std::string, Category>& known_types() {
-  static const std::map<std::string, Category> table = {
-      {"scene", Category::Scene},          {"perspective", Category::Sensor},    {"hdrfilm", Category::Film},
-      {"independent", Category::Sampler},  {"stratified", Category::Sampler},    {"multijitter", Category::Sampler},
-      {"box", Category::Filter},           {"gaussian", Category::Filter},       {"tent", Category::Filter},
-      {"path", Category::Integrator},      {"direct", Category::Integrator},     {"obj", Category::Shape},
-      {"ply", Category::Shape},            {"mesh", Category::Shape},            {"sphere", Category::Shape}, {"heightfield", Category::Shape},
-      {"rectangle", Category::Shape},      {"cube", Category::Shape},            {"diffuse", Category::Bsdf},
-      {"conductor", Category::Bsdf},       {"roughconductor", Category::Bsdf},   {"dielectric", Category::Bsdf},
-      {"roughdielectric", Category::Bsdf}, {"twosided", Category::Bsdf},         {"area", Category::Emitter},
-      {"point", Category::Emitter},        {"directional", Category::Emitter},   {"constant", Category::Emitter},
-      {"envmap", Category::Emitter},       {"bitmap", Category::Texture},        {"ref", Category::Ref},
-      {"rgb", Category::Texture}};
+  static const std::map<std::string, Category> table = [] {
+    std::map<std::string, Category> t = {
+        {"scene", Category::Scene},          {"perspective", Category::Sensor},    {"hdrfilm", Category::Film},
+        {"independent", Category::Sampler},  {"stratified", Category::Sampler},    {"multijitter", Category::Sampler},
+        {"box", Category::Filter},           {"gaussian", Category::Filter},       {"tent", Category::Filter},
+        {"path", Category::Integrator},      {"direct", Category::Integrator},     {"diffuse", Category::Bsdf},
+        {"conductor", Category::Bsdf},       {"roughconductor", Category::Bsdf},   {"dielectric", Category::Bsdf},
+        {"roughdielectric", Category::Bsdf}, {"twosided", Category::Bsdf},         {"area", Category::Emitter},
+        {"point", Category::Emitter},        {"directional", Category::Emitter},   {"constant", Category::Emitter},
+        {"envmap", Category::Emitter},       {"bitmap", Category::Texture},        {"ref", Category::Ref},
+        {"rgb", Category::Texture}};
+    for (const auto& [name, kind] : shape_kinds())
+      if (!t.emplace(name, Category::Shape).second) throw std::logic_error("shape kind '" + name + "' is already a known type");
+    return t;
+  }();
   return table;
 }
 

@@ -21,7 +21,7 @@ std::string str_field(const json& j, const char* key, const std::string& def);
 
 enum class Category { Scene, Sensor, Film, Sampler, Filter, Integrator, Shape, Bsdf, Emitter, Texture, Ref };
 
-// Every type name of the scene format and its category.
+// Every type name of the scene format and its category; the shape kinds come from shape_kinds().
 const std::map<std::string, Category>& known_types();
 // The names of one category, comma-separated, for error messages.
 std::string known_of(Category c);
