@@ -1,0 +1,49 @@
+#include "core/io/scene/emitters.h"
+
+#include "core/io/image_io.h"
+
+namespace limn::io_detail {
+
+void load_emitter(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("emitter", id, type));
+  Emitter e;
+  e.id = id;
+  if (type == "point") {
+    PointEmitter pe;
+    pe.position = p.has("position") ? p.vec3("position", Vec3(0.0f)) : p.transform("to_world").point(Vec3(0.0f));
+    pe.intensity = p.spectrum("intensity", Spectrum(1.0f));
+    e.model = pe;
+  } else if (type == "directional") {
+    DirectionalEmitter de;
+    const Vec3 d = p.has("direction") ? p.vec3("direction", Vec3(0, 0, 1)) : p.transform("to_world").vector(Vec3(0, 0, 1));
+    if (!(glm::length(d) > 0.0f)) p.fail("direction must be non-zero");
+    de.direction = glm::normalize(d);
+    de.irradiance = p.spectrum("irradiance", Spectrum(1.0f));
+    e.model = de;
+  } else if (type == "constant") {
+    e.model = ConstantEmitter{p.spectrum("radiance", Spectrum(1.0f))};
+  } else if (type == "envmap") {
+    EnvmapEmitter env;
+    const std::string path = p.file("filename");
+    try {
+      env.image = std::make_shared<Bitmap>(read_image(path, false));
+    } catch (const std::invalid_argument& err) {
+      p.fail(err.what());
+    }
+    env.world_from_env = p.transform("to_world");
+    float unused_scale;
+    check_similarity(p, env.world_from_env, unused_scale);  // a shear would break the 2 pi^2 sin(theta) Jacobian
+    env.scale = p.number("scale", 1.0f);
+    if (!(env.scale >= 0.0f)) p.fail("scale must be >= 0 (got " + std::to_string(env.scale) + ")");
+    e.model = std::move(env);
+  } else if (type == "area") {
+    p.fail("an 'area' emitter must be nested inside a shape");
+  } else {
+    p.fail("unknown emitter type '" + type + "' (known: " + known_of(Category::Emitter) + ")");
+  }
+  p.check_unused();
+  ctx.scene->emitters.push_back(std::move(e));
+}
+
+}  // namespace limn::io_detail

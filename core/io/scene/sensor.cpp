@@ -1,0 +1,80 @@
+#include "core/io/scene/sensor.h"
+
+#include <limits>
+
+namespace limn::io_detail {
+
+void load_sensor(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("sensor", id, type));
+  if (type != "perspective") p.fail("unknown sensor type '" + type + "' (known: perspective)");
+  Camera& cam = ctx.scene->camera;
+  cam.width = 768;
+  cam.height = 576;
+  for (const auto& [key, child] : p.children()) {
+    const std::string ctype = type_of(*child);
+    p.mark_used(key);
+    if (ctype == "hdrfilm") {
+      Props fp(ctx, *child, describe("film", key, ctype));
+      cam.width = fp.integer("width", 768);
+      cam.height = fp.integer("height", 576);
+      if (cam.width <= 0 || cam.height <= 0 || cam.width > 32768 || cam.height > 32768)
+        fp.fail("width and height must be in [1, 32768] (got " + std::to_string(cam.width) + " x " + std::to_string(cam.height) + ")");
+      for (const auto& [fk, fchild] : fp.children()) {
+        fp.mark_used(fk);
+        const std::string ft = type_of(*fchild);
+        if (ft != "box") ctx.scene->warnings.push_back(ctx.source + ": film '" + key + "': reconstruction filter '" + ft +
+                                                       "' is not supported; limn averages samples uniformly over each pixel (box)");
+      }
+      fp.mark_used("pixel_format");
+      fp.mark_used("component_format");
+      fp.check_unused();
+    } else if (known_types().count(ctype) && known_types().at(ctype) == Category::Sampler) {
+      Props sp(ctx, *child, describe("sampler", key, ctype));
+      ctx.scene->spp = sp.integer("sample_count", 4);
+      if (ctx.scene->spp <= 0) sp.fail("sample_count must be > 0 (got " + std::to_string(ctx.scene->spp) + ")");
+      if (ctype != "independent") ctx.scene->warnings.push_back(ctx.source + ": sampler '" + key + "': '" + ctype + "' is rendered with independent samples");
+      sp.mark_used("seed");
+      sp.check_unused();
+    } else {
+      p.fail("a '" + ctype + "' cannot be nested in a sensor (under '" + key + "')");
+    }
+  }
+  cam.world_from_camera = p.transform("to_world");
+  try {
+    cam.set_fov(p.number("fov", 39.3077f), p.string("fov_axis", "x"));
+  } catch (const std::invalid_argument& e) {
+    p.fail(e.what());
+  }
+  cam.near_clip = p.number("near_clip", 1e-2f);
+  cam.far_clip = p.number("far_clip", 1e4f);
+  if (!(cam.near_clip > 0.0f && cam.far_clip > cam.near_clip)) p.fail("need 0 < near_clip < far_clip");
+  p.check_unused();
+}
+
+void load_integrator(Context& ctx, const json& j, const std::string& id) {
+  const std::string type = type_of(j);
+  Props p(ctx, j, describe("integrator", id, type));
+  IntegratorSettings& s = ctx.scene->integrator;
+  s.type = type;
+  s.hide_emitters = p.boolean("hide_emitters", false);
+  if (type == "path") {
+    s.max_depth = p.integer("max_depth", -1);
+    s.rr_depth = p.integer("rr_depth", 5);
+    if (s.max_depth < -1) p.fail("max_depth must be -1 (unbounded) or >= 0 (got " + std::to_string(s.max_depth) + ")");
+    if (s.rr_depth < 1) p.fail("rr_depth must be >= 1 (got " + std::to_string(s.rr_depth) + ")");
+  } else if (type == "direct") {
+    s.max_depth = 2;  // emitters seen directly plus one bounce
+    s.rr_depth = std::numeric_limits<int>::max();
+    const int ne = p.integer("emitter_samples", 1), nb = p.integer("bsdf_samples", 1);
+    if (ne < 0 || ne > 1 || nb < 0 || nb > 1 || ne + nb == 0)
+      p.fail("emitter_samples and bsdf_samples must each be 0 or 1, not both 0 (got " + std::to_string(ne) + ", " + std::to_string(nb) + ")");
+    s.emitter_sampling = ne == 1;
+    s.bsdf_sampling = nb == 1;
+  } else {
+    p.fail("unknown integrator type '" + type + "' (known: path, direct)");
+  }
+  p.check_unused();
+}
+
+}  // namespace limn::io_detail

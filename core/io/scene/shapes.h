@@ -1,0 +1,32 @@
+// Shape loaders. A shape kind is a loader function (in its own file: meshes.cpp, sphere.cpp,
+// heightfield.cpp) plus one line in the table of shape_kinds() (shapes.cpp), which also makes its
+// type name known (known_types()). load_shape does what all kinds share: the object's to_world, the
+// nested bsdf (inline or reference) and area emitter, the default bsdf.
+#pragma once
+#include <map>
+#include <string>
+#include "core/io/scene/props.h"
+
+namespace limn::io_detail {
+
+// Builds the geometry of a shape of type `type`; to_world has been read already.
+using ShapeLoader = ShapeGeometry (*)(const Props& p, const std::string& type, const Transform& to_world);
+
+struct ShapeKind {
+  ShapeLoader load;
+  bool area_emitter;  // whether an area emitter may be nested in it
+};
+
+// Type name -> kind, for every shape type of the scene format.
+const std::map<std::string, ShapeKind>& shape_kinds();
+
+// obj, ply, mesh, rectangle, cube (meshes.cpp).
+ShapeGeometry load_mesh_shape(const Props& p, const std::string& type, const Transform& to_world);
+// sphere (sphere.cpp).
+ShapeGeometry load_sphere(const Props& p, const std::string& type, const Transform& to_world);
+// heightfield (heightfield.cpp).
+ShapeGeometry load_heightfield(const Props& p, const std::string& type, const Transform& to_world);
+
+void load_shape(Context& ctx, const json& j, const std::string& id);
+
+}  // namespace limn::io_detail
