@@ -17,15 +17,13 @@ import warnings
 
 import numpy as np
 
-from . import optim
-from .demo import chamfer, surface_points
-from .images import write_image, write_ply
-from .scene import load_dict
+from .. import load_dict, optim, write_image, write_ply
+from .multiview import chamfer, surface_points
 
 def scene_dir() -> str:
     """scenes/shadow_wall: the copy installed with the package, else the source tree's."""
     here = os.path.dirname(os.path.abspath(__file__))
-    for d in (os.path.join(here, "scenes", "shadow_wall"), os.path.join(os.path.dirname(os.path.dirname(here)), "scenes", "shadow_wall")):
+    for d in (os.path.join(here, "scenes", "shadow_wall"), os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(here))), "scenes", "shadow_wall")):
         if os.path.exists(os.path.join(d, "scene.json")):
             return d
     raise FileNotFoundError(f"shadow_wall/scene.json is neither installed in {here}/scenes nor in the source tree")
