@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     d.add_argument("--task", default="terrain", choices=["terrain", "shadow_art", "two_lights"],
                    help="heightfield: terrain from four views, shadow art, or one field for two lights")
     d.add_argument("-o", "--output", default=None, help="folder for the result (PLY, renders, history.json); "
-                                                        "default out/demo or out/shadows")
+                                                        "default out/demo, out/shadows or out/heightfield")
     d.add_argument("--iterations", type=int, default=None, help="default 80 (multiview), 150 (shadows), 80 (heightfield)")
     d.add_argument("--spp", type=int, default=8)
     d.add_argument("--guiding", default="none", choices=["none", "grid"], help="shadows: boundary guiding")
@@ -111,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--fd-spp", type=int, default=4096)
     b.add_argument("--eps", type=float, default=1e-2)
     b.add_argument("--runs", type=int, default=1, help="runs per method and budget (different seeds); errors are averaged")
-    b.add_argument("--out", default="docs/reports")
+    b.add_argument("--out", default="out/bench", metavar="DIR",
+                   help="folder for the report: DIR/<scene>.md and DIR/<scene>.png; default out/bench")
     b.set_defaults(func=cmd_bench)
     args = parser.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])
