@@ -40,34 +40,34 @@ def cmd_render(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     import warnings
     if args.which == "heightfield":
-        from . import heightfield_demo
+        from .examples import heightfield
         if args.report:
-            md = heightfield_demo.report(args.report, iterations=args.iterations or 80,
-                                         argv="python3 -m limn " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["demo"] else "")
-            print(f"wrote {os.path.abspath(md)}")
-            return 0
-        summary = heightfield_demo.run(args.task, out=args.output or "out/heightfield", iterations=args.iterations or 80,
-                                       spp=args.spp if args.spp != 8 else 4)
-        return 0 if summary["final_loss"] < summary["initial_loss"] else 1
-    if args.which == "shadows":
-        from . import shadow_demo
-        if args.report:
-            md = shadow_demo.report(args.report, seeds=args.seeds, iterations=args.iterations or 150,
+            md = heightfield.report(args.report, iterations=args.iterations or 80,
                                     argv="python3 -m limn " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["demo"] else "")
             print(f"wrote {os.path.abspath(md)}")
             return 0
-        summary = shadow_demo.run(out=args.output or "out/shadows", iterations=args.iterations or 150, spp=args.spp,
-                                  guiding=args.guiding)
+        summary = heightfield.run(args.task, out=args.output or "out/heightfield", iterations=args.iterations or 80,
+                                  spp=args.spp if args.spp != 8 else 4)
+        return 0 if summary["final_loss"] < summary["initial_loss"] else 1
+    if args.which == "shadows":
+        from .examples import shadows
+        if args.report:
+            md = shadows.report(args.report, seeds=args.seeds, iterations=args.iterations or 150,
+                                argv="python3 -m limn " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["demo"] else "")
+            print(f"wrote {os.path.abspath(md)}")
+            return 0
+        summary = shadows.run(out=args.output or "out/shadows", iterations=args.iterations or 150, spp=args.spp,
+                              guiding=args.guiding)
         return 0 if summary["final_chamfer"] < summary["initial_chamfer"] else 1
-    from . import demo
+    from .examples import multiview
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the summary lines about the sphere-free scene are not news here
-        summary = demo.run(out=args.output or "out/demo", iterations=args.iterations or 80, spp=args.spp)
+        summary = multiview.run(out=args.output or "out/demo", iterations=args.iterations or 80, spp=args.spp)
     return 0 if summary["final_loss"] < summary["initial_loss"] else 1
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from . import bench
+    from .examples import bench
     md = bench.run(args.scene, args.param, args.methods.split(","), args.budgets, args.fd_spp, args.eps, args.out,
                    tangent=args.tangent, argv=args.argv, runs=args.runs)
     print(f"wrote {os.path.abspath(md)}")
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     d.add_argument("--task", default="terrain", choices=["terrain", "shadow_art", "two_lights"],
                    help="heightfield: terrain from four views, shadow art, or one field for two lights")
     d.add_argument("-o", "--output", default=None, help="folder for the result (PLY, renders, history.json); "
-                                                        "default out/demo or out/shadows")
+                                                        "default out/demo, out/shadows or out/heightfield")
     d.add_argument("--iterations", type=int, default=None, help="default 80 (multiview), 150 (shadows), 80 (heightfield)")
     d.add_argument("--spp", type=int, default=8)
     d.add_argument("--guiding", default="none", choices=["none", "grid"], help="shadows: boundary guiding")
@@ -111,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--fd-spp", type=int, default=4096)
     b.add_argument("--eps", type=float, default=1e-2)
     b.add_argument("--runs", type=int, default=1, help="runs per method and budget (different seeds); errors are averaged")
-    b.add_argument("--out", default="docs/reports")
+    b.add_argument("--out", default="out/bench", metavar="DIR",
+                   help="folder for the report: DIR/<scene>.md and DIR/<scene>.png; default out/bench")
     b.set_defaults(func=cmd_bench)
     args = parser.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])

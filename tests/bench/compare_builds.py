@@ -29,7 +29,10 @@ def measure(scene_path: str, param: str, methods: list[str], budget: int, runs: 
     child writes the reference to reference_file; the second reads it, so both meet one reference."""
     import numpy as np
     import limn
-    from limn.bench import default_tangent, method_options
+    try:
+        from limn.examples.bench import default_tangent, method_options
+    except ImportError:  # a build from before the bench moved to limn.examples
+        from limn.bench import default_tangent, method_options
     scene = limn.load(scene_path)
     t = {param: default_tangent(scene.params[param], "x")}
     scene.set_differentiable([param])

@@ -1,5 +1,5 @@
 """Cost of render_backward relative to render at equal samples per pixel, and memory, on the
-demo scene (limn.demo: a 642-vertex mesh, three views' first camera, 48x48). Writes
+demo scene (limn.examples.multiview: a 642-vertex mesh, three views' first camera, 48x48). Writes
 docs/reports/derivative_cost.md. Run after ./bootstrap.sh:
 
     .venv/bin/python tests/bench/derivative_cost.py
@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 
 import limn
-from limn import demo
+from limn.examples import multiview
 from limn.shapes import icosphere
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -36,7 +36,7 @@ def main() -> int:
     sphere, faces = icosphere(2)
     rows = []
     for size in (48, 128):
-        scene = limn.load_dict(demo.view(demo.ground_truth(sphere), faces, (0, -4.5, 1.2), size))
+        scene = limn.load_dict(multiview.view(multiview.ground_truth(sphere), faces, (0, -4.5, 1.2), size))
         scene.set_differentiable(["shape.vertex_positions"])
         adjoint = np.random.default_rng(0).normal(size=(size, size, 3)).astype(np.float32)
         for spp in (8, 32):

@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 
 import limn
-from limn.bench import default_tangent
+from limn.examples.bench import default_tangent
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # (eps, spp): the previous reports' reference, two smaller eps, and the reports' reference now.

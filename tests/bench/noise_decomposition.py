@@ -19,7 +19,7 @@ import warnings
 import numpy as np
 
 import limn
-from limn.bench import default_tangent, guide_seconds, method_options
+from limn.examples.bench import default_tangent, guide_seconds, method_options
 
 SCENES = {"sphere": "shape.center", "torus": "shape.vertex_positions", "cube_hole": "shape.vertex_positions",
           "bunny": "shape.vertex_positions"}

@@ -20,7 +20,7 @@ import warnings
 import numpy as np
 
 import limn
-from limn.bench import default_tangent, guide_seconds
+from limn.examples.bench import default_tangent, guide_seconds
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PARAMS = {"sphere": "shape.center", "torus": "shape.vertex_positions", "cube_hole": "shape.vertex_positions",

@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 
 import limn
-from limn.bench import default_tangent, guide_seconds
+from limn.examples.bench import default_tangent, guide_seconds
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 METHODS = (("baseline grid", {"guiding": "grid", "projective": False}),

@@ -198,6 +198,26 @@ def test_cli_bench_writes_the_table_with_noise(tmp_path):
     assert bad.returncode != 0 and "unknown method 'octre'" in bad.stderr
 
 
+def test_examples_are_not_imported_with_the_library():
+    """The demos and the bench live in limn.examples, outside the API: `import limn` loads none of them."""
+    r = subprocess.run([sys.executable, "-c", "import sys, limn; print(sorted(m for m in sys.modules if m.startswith('limn.')))"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "examples" not in r.stdout and not any("demo" in name or "bench" in name for name in limn.__all__)
+
+
+def test_cli_shadows_demo_runs_outside_the_checkout(tmp_path):
+    """python3 -m limn demo shadows from a folder that is not the checkout: the scene comes from the
+    installed package, and the results go only to -o."""
+    from limn.examples import shadows
+    assert os.path.commonpath([shadows.scene_dir(), os.path.dirname(limn.__file__)]) == os.path.dirname(limn.__file__)
+    r = subprocess.run([sys.executable, "-m", "limn", "demo", "shadows", "-o", "result", "--iterations", "2"],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr + r.stdout
+    assert sorted(os.listdir(tmp_path)) == ["result"]
+    assert {"result.ply", "result.png", "target.png", "initial.png", "history.json"} <= set(os.listdir(tmp_path / "result"))
+
+
 def test_max_depth_zero_is_black(scene_dict):
     scene_dict["integrator"]["max_depth"] = 0
     assert limn.load_dict(scene_dict).render().max() == 0.0

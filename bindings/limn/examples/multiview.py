@@ -15,10 +15,8 @@ import time
 
 import numpy as np
 
-from . import optim
-from .images import write_image, write_ply
-from .scene import load_dict
-from .shapes import icosphere
+from .. import load_dict, optim, write_image, write_ply
+from ..shapes import icosphere
 
 
 def ground_truth(vertices: np.ndarray) -> np.ndarray:

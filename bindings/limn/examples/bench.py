@@ -13,8 +13,7 @@ import warnings
 
 import numpy as np
 
-from .fd import fd
-from .scene import load
+from .. import fd, load
 
 METHODS = {
     "interior": {"spp_primary": 0, "spp_boundary": 0},

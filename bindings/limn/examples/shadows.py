@@ -5,30 +5,34 @@ lights casts two shadows on a curved diffuse wall (scenes/shadow_wall/). One cam
 from the front and both shadows; the shadows carry the object's outline as seen from each light.
 The optimisation starts from a sphere and recovers the ground-truth shape (scenes/shadow_wall/
 truth.ply) from that single image: interior, primary-visibility and indirect boundary derivatives
-(the shadows), Adam with the Large-Steps preconditioner. ``report()`` runs it with the shadow term
-on and off and with both guiding modes over several seeds and writes docs/reports/
-shadow_reconstruction.md with a plot."""
+(the shadows), Adam with the Large-Steps preconditioner. ``report(folder)`` runs it with the shadow
+term on and off and with both guiding modes over several seeds and writes
+<folder>/shadow_reconstruction.md with a plot.
+
+The scene is read from the copy installed with the package (limn/examples/scenes/shadow_wall,
+installed from the repository's scenes/shadow_wall by CMakeLists.txt), so the demo runs from any
+working directory without the source tree."""
 from __future__ import annotations
 
 import json
 import os
 import time
 import warnings
+from importlib import resources
 
 import numpy as np
 
-from . import optim
-from .demo import chamfer, surface_points
-from .images import write_image, write_ply
-from .scene import load_dict
+from .. import load_dict, optim, write_image, write_ply
+from .multiview import chamfer, surface_points
+
 
 def scene_dir() -> str:
-    """scenes/shadow_wall: the copy installed with the package, else the source tree's."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    for d in (os.path.join(here, "scenes", "shadow_wall"), os.path.join(os.path.dirname(os.path.dirname(here)), "scenes", "shadow_wall")):
-        if os.path.exists(os.path.join(d, "scene.json")):
-            return d
-    raise FileNotFoundError(f"shadow_wall/scene.json is neither installed in {here}/scenes nor in the source tree")
+    """The shadow_wall scene's folder: package data of limn.examples (scenes/shadow_wall)."""
+    d = resources.files(__package__) / "scenes" / "shadow_wall"
+    if not (d / "scene.json").is_file():
+        raise FileNotFoundError(f"{d}/scene.json is missing: this limn was installed without the example scenes "
+                                f"(CMakeLists.txt installs scenes/shadow_wall there; reinstall with pip install .)")
+    return os.fspath(d)
 
 
 def _load(shape_file: str, size: int):
@@ -110,9 +114,10 @@ CONFIGS = [("shadow term on, guiding none", {"spp_boundary": 64, "guiding": "non
            ("shadow term off (spp_boundary = 0)", {"spp_boundary": 0, "guiding": "none"})]
 
 
-def report(folder: str = "docs/reports", seeds: int = 3, iterations: int = 150, argv: str = "") -> str:
+def report(folder: str, seeds: int = 3, iterations: int = 150, argv: str = "") -> str:
     """Every configuration of CONFIGS over `seeds` seeds: a table and a plot of loss and Chamfer
-    distance against iterations and time."""
+    distance against iterations and time, written to <folder>/shadow_reconstruction.md and .png.
+    `argv` is the command line the report names to regenerate it."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -138,7 +143,7 @@ def report(folder: str = "docs/reports", seeds: int = 3, iterations: int = 150, 
     png = os.path.join(folder, "shadow_reconstruction.png")
     fig.savefig(png, dpi=110)
     lines = ["# Shape from shadows on a curved wall", "",
-             f"Regenerate: `{argv or 'python3 -m limn demo shadows --report docs/reports'}`", "",
+             f"Regenerate: `{argv or 'python3 -m limn demo shadows --report ' + folder}`", "",
              "Scene: scenes/shadow_wall (a flat-shaded icosphere, 162 vertices, optimised towards truth.ply; two small "
              "area lights cast its shadows on a curved diffuse wall; one 64x48 camera). Target: 1024 spp. Each "
              f"iteration: one 8-spp render and one backward pass (8 interior paths and 8 primary samples per pixel), "

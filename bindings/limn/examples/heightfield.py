@@ -19,10 +19,8 @@ import warnings
 
 import numpy as np
 
-from . import optim
-from .images import write_image
-from .scene import load_dict
-from .shapes import terrain_heights
+from .. import load_dict, optim, write_image
+from ..shapes import terrain_heights
 
 N = 33  # heights per side
 
