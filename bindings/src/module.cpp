@@ -10,8 +10,8 @@
 #include <functional>
 #include "core/diff/render_diff.h"
 #include "core/render/accel.h"
-#include "core/io/image_io.h"
-#include "core/io/mesh_io.h"
+#include "core/io/formats/image_io.h"
+#include "core/io/formats/mesh_io.h"
 #include "core/io/scene_loader.h"
 #include "core/optim/large_steps.h"
 #include "core/render/integrators/render.h"

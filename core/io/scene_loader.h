@@ -7,17 +7,10 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+#include "core/io/scene/array_data.h"
 #include "core/render/scene.h"
 
 namespace limn {
-
-// A dense array passed alongside a dictionary (numpy arrays from Python). In the dictionary it is
-// referenced as {"__limn_array__": index}.
-struct ArrayData {
-  std::vector<size_t> shape;
-  std::vector<double> values;  // row-major
-  bool integer = false;
-};
 
 std::unique_ptr<Scene> load_scene_file(const std::string& path);
 std::unique_ptr<Scene> load_scene_dict(const nlohmann::json& description, const std::string& source,

@@ -1,6 +1,6 @@
 #include "core/io/scene/emitters.h"
 
-#include "core/io/image_io.h"
+#include "core/io/formats/image_io.h"
 
 namespace limn::io_detail {
 

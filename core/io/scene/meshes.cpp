@@ -1,7 +1,7 @@
 #include "core/io/scene/shapes.h"
 
 #include <sstream>
-#include "core/io/mesh_io.h"
+#include "core/io/formats/mesh_io.h"
 
 // Triangle meshes: obj and ply files, "mesh" from arrays, the built-in rectangle and cube.
 namespace limn::io_detail {

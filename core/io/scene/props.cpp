@@ -2,7 +2,7 @@
 
 #include <functional>
 #include <stdexcept>
-#include "core/io/image_io.h"
+#include "core/io/formats/image_io.h"
 #include "core/io/scene/shapes.h"
 
 namespace limn::io_detail {

@@ -9,7 +9,8 @@
 #include <utility>
 #include <vector>
 #include <nlohmann/json.hpp>
-#include "core/io/scene_loader.h"
+#include "core/io/scene/array_data.h"
+#include "core/render/scene.h"
 
 namespace limn::io_detail {
 

@@ -1,4 +1,4 @@
-#include "core/io/image_io.h"
+#include "core/io/formats/image_io.h"
 
 #include <OpenImageIO/imageio.h>
 #include <algorithm>

@@ -1,4 +1,4 @@
-#include "core/io/mesh_io.h"
+#include "core/io/formats/mesh_io.h"
 
 #include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
