@@ -72,21 +72,29 @@ Var DiffHeightfieldFrame::ray_t(PathInputs& in, const VV& o, const VV& d, double
   return Var(t0) - g / Var(dg);
 }
 
+namespace {
+// The material point at grid coordinates sp.bary: fixed local (x, y), its height and slopes.
+struct AttachedHeight {
+  DiffHeightfieldFrame F;
+  Var x, y, z, zx, zy;
+  AttachedHeight(const DiffContext& c, const Heightfield& hf, const SurfacePoint& sp)
+      : F(c.scene, c.params, c.in, sp.shape), x(hf.local_x(sp.bary.x)), y(hf.local_y(sp.bary.y)) {
+    F.height(c.in, x, y, z, zx, zy);
+  }
+  VV world_point() const { return F.to_world_point(VV(x, y, z)); }
+};
+}  // namespace
+
 VV SurfaceDiff<Heightfield>::position(const DiffContext& c, const Heightfield& hf, const SurfacePoint& sp) {
-  const DiffHeightfieldFrame F(c.scene, c.params, c.in, sp.shape);
-  const ad::Var x(hf.local_x(sp.bary.x)), y(hf.local_y(sp.bary.y));
-  ad::Var z, zx, zy;
-  F.height(c.in, x, y, z, zx, zy);
-  return F.to_world_point(ad::V3<ad::Var>(x, y, z));
+  return AttachedHeight(c, hf, sp).world_point();
 }
 
 DiffVertex SurfaceDiff<Heightfield>::attach(const DiffContext& c, const Heightfield& hf, const SurfacePoint& sp) {
   DiffVertex x;
-  const DiffHeightfieldFrame F(c.scene, c.params, c.in, sp.shape);
-  const Var lx(hf.local_x(sp.bary.x)), ly(hf.local_y(sp.bary.y));
-  Var z, zx, zy;
-  F.height(c.in, lx, ly, z, zx, zy);
-  x.p = F.to_world_point(VV(lx, ly, z));
+  const AttachedHeight h(c, hf, sp);
+  const Var &zx = h.zx, &zy = h.zy;
+  const DiffHeightfieldFrame& F = h.F;
+  x.p = h.world_point();
   x.ng = x.ns = normalize(F.to_world_vector(VV(-zx, -zy, Var(1.0))));
   const Var area = sqrt(Var(1.0) + zx * zx + zy * zy);  // dA / (dx dy)
   x.jacobian = area / Var(area.v);

@@ -19,6 +19,9 @@ void triangle(const DiffContext& c, const Mesh& m, int shape, int prim, VV& v0, 
   v2 = mesh_vertex(c, shape, m.indices[3 * prim + 2]);
 }
 
+// The point at barycentrics (b1, b2).
+VV interpolate(const VV& v0, const VV& v1, const VV& v2, const Var& b1, const Var& b2) { return v0 * (Var(1.0) - b1 - b2) + v1 * b1 + v2 * b2; }
+
 // Area-weighted vertex normal from the triangles around vertex i, each with its
 // Mesh::normal_sign (exactly as Mesh::update_derived).
 VV vertex_normal(const DiffContext& c, const Mesh& m, int shape, uint32_t i) {
@@ -341,10 +344,9 @@ ad::V3<ad::Var> mesh_vertex(const DiffContext& c, int shape, uint32_t i) {
 }
 
 VV SurfaceDiff<Mesh>::position(const DiffContext& c, const Mesh& m, const SurfacePoint& sp) {
-  const uint32_t* idx = &m.indices[3 * size_t(sp.prim)];
-  const ad::Var b1(sp.bary.x), b2(sp.bary.y);
-  return mesh_vertex(c, sp.shape, idx[0]) * (ad::Var(1.0) - b1 - b2) + mesh_vertex(c, sp.shape, idx[1]) * b1 +
-         mesh_vertex(c, sp.shape, idx[2]) * b2;
+  VV v0, v1, v2;
+  triangle(c, m, sp.shape, sp.prim, v0, v1, v2);
+  return interpolate(v0, v1, v2, Var(sp.bary.x), Var(sp.bary.y));
 }
 
 DiffVertex SurfaceDiff<Mesh>::attach(const DiffContext& c, const Mesh& m, const SurfacePoint& sp) {
@@ -352,7 +354,7 @@ DiffVertex SurfaceDiff<Mesh>::attach(const DiffContext& c, const Mesh& m, const 
   VV v0, v1, v2;
   triangle(c, m, sp.shape, sp.prim, v0, v1, v2);
   const Var b1(sp.bary.x), b2(sp.bary.y);
-  x.p = v0 * (Var(1.0) - b1 - b2) + v1 * b1 + v2 * b2;
+  x.p = interpolate(v0, v1, v2, b1, b2);
   surface_frame(c, m, sp.shape, sp.prim, v0, v1, v2, b1, b2, x);
   const Var area2 = length(cross(v1 - v0, v2 - v0));
   x.jacobian = area2 / Var(area2.v);  // 1 at the primal point, exactly

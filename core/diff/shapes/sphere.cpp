@@ -14,16 +14,42 @@ VV constant(const Vec3& v) { return VV(Var(v.x), Var(v.y), Var(v.z)); }
 
 const Sphere& sphere_of(const Scene& scene, int shape) { return std::get<Sphere>(scene.shapes[shape].geometry); }
 
-// The sphere's silhouette circle seen from eye: centre, radius and the plane's frame.
+// The circle where rays from a viewpoint e graze the sphere (its silhouette seen from e): the unit
+// normals n = cos_a a + sin_a s, for unit s perpendicular to a, where a points from the centre
+// towards e and cos_a = r / |e - c|; its points are c + r n. One routine for the camera's outline
+// (the primary term, on the tape), a point light's shadow outline (sample_delta) and the
+// projection (Listing 1). False when e is not outside the sphere by more than `margin` r.
+template <typename T>
+struct GrazingCircle {
+  ad::V3<T> a;
+  T cos_a, sin_a;
+  ad::V3<T> normal(const ad::V3<T>& s) const { return a * cos_a + s * sin_a; }
+};
+template <typename T>
+bool grazing_circle(const ad::V3<T>& c, const T& r, const ad::V3<T>& e, double margin, GrazingCircle<T>& out) {
+  const ad::V3<T> to_e = e - c;
+  const T d = length(to_e);
+  if (!(ad::value(d) > ad::value(r) * (1.0 + margin))) return false;
+  out.a = to_e / d;
+  out.cos_a = r / d;
+  out.sin_a = sqrt(T(1.0) - out.cos_a * out.cos_a);
+  return true;
+}
+// A directional light's outline: the great circle perpendicular to its direction.
+GrazingCircle<float> grazing_circle_at_infinity(const Vec3& towards) {
+  return {ad::V3<float>(towards.x, towards.y, towards.z), 0.0f, 1.0f};
+}
+ad::V3<float> v3(const Vec3& v) { return ad::V3<float>(v.x, v.y, v.z); }
+Vec3 vec3(const ad::V3<float>& v) { return Vec3(v.x, v.y, v.z); }
+
+// The camera's outline as a centre, a radius and its plane's frame (e1, e2).
 template <typename T>
 bool outline(const ad::V3<T>& c, const T& r, const ad::V3<double>& eye, ad::V3<T>& q, T& rho, ad::V3<T>& e1, ad::V3<T>& e2) {
-  const ad::V3<T> axis = c - ad::V3<T>(T(eye.x), T(eye.y), T(eye.z));
-  const T d = length(axis);
-  if (ad::value(d) <= ad::value(r)) return false;  // the eye is inside: no silhouette
-  const ad::V3<T> u = axis / d;
-  q = c - u * (r * r / d);
-  rho = r * sqrt(T(1.0) - (r * r) / (d * d));
-  const diff::Frame3<T> f(u);
+  GrazingCircle<T> g;
+  if (!grazing_circle(c, r, ad::V3<T>(T(eye.x), T(eye.y), T(eye.z)), 0.0, g)) return false;  // the eye is inside: no silhouette
+  q = c + g.a * (r * g.cos_a);
+  rho = r * g.sin_a;
+  const diff::Frame3<T> f(-g.a);
   e1 = f.s;
   e2 = f.t;
   return true;
@@ -53,10 +79,9 @@ class SphereProjector : public ShapeProjector {
   std::optional<Projection> project(const Vec3& xa, const SurfaceInteraction& hit, Pcg32&) const override {
     const Sphere& sp = m_sphere;
     const int segment = m_segment;
-    const Vec3 co = xa - sp.center;
-    const float dist = glm::length(co);
     const Vec3 n = glm::normalize(hit.p - sp.center);
-    if (!(dist > sp.radius * (1.0f + 1e-4f))) {
+    GrazingCircle<float> circle;
+    if (!grazing_circle(v3(sp.center), sp.radius, v3(xa), 1e-4, circle)) {
       // xa (almost) inside: no silhouette; keep x_b, take the tangential direction closest to xa - x_b.
       const Vec3 w0 = glm::normalize(xa - hit.p);
       const Vec3 t = w0 - glm::dot(w0, n) * n;
@@ -64,16 +89,15 @@ class SphereProjector : public ShapeProjector {
       const Vec3 xb = sp.center + sp.radius * n;
       return Projection{m_space.invert(segment, xb, glm::normalize(t)), segment, xb, glm::normalize(t), false};
     }
-    const Vec3 co_dir = co / dist;
-    Vec3 side = n - glm::dot(n, co_dir) * co_dir;
+    // The circle's point in the plane of x_a, the centre and the hit.
+    const Vec3 a = vec3(circle.a);
+    Vec3 side = n - glm::dot(n, a) * a;
     if (!(glm::length(side) > 1e-6f)) {  // the hit faces xa head-on: any side will do
-      const Frame f(co_dir);
+      const Frame f(a);
       side = f.s;
     }
     side = glm::normalize(side);
-    const float sin_phi = sp.radius / dist;
-    const Vec3 nb = co_dir * sin_phi + side * safe_sqrt(1.0f - sin_phi * sin_phi);
-    const Vec3 xb = sp.center + sp.radius * nb;
+    const Vec3 xb = sp.center + sp.radius * vec3(circle.normal(v3(side)));
     // Section 5: the original direction made tangential keeps what the segment saw at x_a.
     const Vec3 w_orig = glm::normalize(xa - hit.p);
     const Vec3 nx = glm::normalize(xb - sp.center);
@@ -108,10 +132,9 @@ VV SurfaceDiff<Sphere>::position(const DiffContext& c, const Sphere&, const Surf
 
 DiffVertex SurfaceDiff<Sphere>::attach(const DiffContext& c, const Sphere& s, const SurfacePoint& sp) {
   DiffVertex x;
-  const VV center = sphere_center(c, sp.shape);
+  x.p = position(c, s, sp);
   const Var r = sphere_radius(c, sp.shape);
   const VV n0 = constant(sp.n);
-  x.p = center + n0 * r;
   x.ng = x.ns = n0;
   const double r0 = s.radius;
   x.jacobian = (r * r) / Var(r0 * r0);
@@ -168,23 +191,14 @@ bool BoundarySegments<Sphere>::sample_delta(const Scene&, const Sphere& sp, cons
                                             const Emitter& light, BoundaryPoint& out) {
   const auto* point = std::get_if<PointEmitter>(&light.model);
   const auto* directional = std::get_if<DirectionalEmitter>(&light.model);
-  // The sphere's silhouette circle seen from the light: normals n with n . a_hat = cos(alpha),
-  // a_hat towards the light, cos(alpha) = r / (distance to the light) (0 for directional lights).
-  Vec3 a_hat;
-  float cos_alpha = 0.0f;
-  if (point) {
-    const Vec3 a = point->position - sp.center;
-    const float dist = glm::length(a);
-    if (!(dist > sp.radius * (1.0f + 1e-4f))) return false;  // the light is (almost) inside the sphere
-    a_hat = a / dist;
-    cos_alpha = sp.radius / dist;
-  } else {
-    a_hat = -directional->direction;
-  }
-  const float sin_alpha = safe_sqrt(1.0f - cos_alpha * cos_alpha);
-  const Frame frame(a_hat);
+  // The sphere's silhouette circle seen from the light.
+  GrazingCircle<float> circle;
+  if (!point) circle = grazing_circle_at_infinity(-directional->direction);
+  else if (!grazing_circle(v3(sp.center), sp.radius, v3(point->position), 1e-4, circle)) return false;  // the light is (almost) inside
+  const float sin_alpha = circle.sin_a;
+  const Frame frame(vec3(circle.a));
   const float psi = 2.0f * kPi * f;
-  const Vec3 n = glm::normalize(cos_alpha * a_hat + sin_alpha * (std::cos(psi) * frame.s + std::sin(psi) * frame.t));
+  const Vec3 n = glm::normalize(vec3(circle.normal(v3(std::cos(psi) * frame.s + std::sin(psi) * frame.t))));
   const Vec3 xb = sp.center + sp.radius * n;
   const Vec3 w = point ? glm::normalize(xb - point->position) : directional->direction;
   finish_sphere(sp, n, w, out);
@@ -193,10 +207,8 @@ bool BoundarySegments<Sphere>::sample_delta(const Scene&, const Sphere& sp, cons
   return out.pdf > 0.0f && std::isfinite(out.pdf);
 }
 
-VV BoundarySegments<Sphere>::attached_point(const DiffContext& c, const Sphere&, const BoundarySegment& s, const BoundaryPoint& p) {
-  const ad::V3<ad::Var> center = sphere_center(c, s.shape);
-  const ad::Var r = sphere_radius(c, s.shape);
-  return center + ad::V3<ad::Var>(ad::Var(p.param.x), ad::Var(p.param.y), ad::Var(p.param.z)) * r;
+VV BoundarySegments<Sphere>::attached_point(const DiffContext& c, const Sphere& sp, const BoundarySegment& s, const BoundaryPoint& p) {
+  return SurfaceDiff<Sphere>::position(c, sp, SurfacePoint{s.shape, 0, Vec2(0.0f), p.param, Vec2(0.0f)});  // p.param: the unit normal
 }
 
 std::unique_ptr<ShapeProjector> BoundarySegments<Sphere>::projector(const Scene&, const Sphere& s, const SegmentSpace& space, int,
