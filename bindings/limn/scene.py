@@ -118,60 +118,18 @@ class Scene:
         return list(self._differentiable)
 
     # Derivative options and their defaults (render_forward / render_backward keyword arguments),
-    # from the C++ DiffOptions (the sample counts and the seed are arguments of their own).
+    # from the C++ DiffOptions, the one place that states them; the core validates every value
+    # (core/diff/diff_options.h). The sample counts and the seed are arguments of their own.
     DIFF_OPTIONS = {k: (float(f"{v:.6g}") if isinstance(v, float) else v)
                     for k, v in _core.diff_option_defaults().items()
-                    if k not in ("spp_interior", "spp_primary", "spp_boundary", "seed")}
+                    if k not in ("spp", "spp_interior", "spp_primary", "spp_boundary", "seed")}
 
     def _diff_options(self, spp, seed, spp_interior, spp_primary, spp_boundary, options: dict) -> dict:
-        if not self._differentiable:
-            raise ValueError(f"{self._native.source}: no differentiable parameters; call set_differentiable() first")
         unknown = set(options) - set(self.DIFF_OPTIONS)
         if unknown:
             raise TypeError(f"unknown derivative option(s) {sorted(unknown)}; known: {sorted(self.DIFF_OPTIONS)}")
-        opts = dict(self.DIFF_OPTIONS, **options)
-        if opts["guiding"] not in ("none", "grid", "octree"):
-            raise ValueError(f"guiding must be 'none', 'grid' or 'octree' (got '{opts['guiding']}')")
-        if opts["boundary_sampler"] not in ("independent", "stratified"):
-            raise ValueError(f"boundary_sampler must be 'independent' or 'stratified' (got '{opts['boundary_sampler']}')")
-        if opts["project_seed"] not in ("bsdf", "emitter", "both"):
-            raise ValueError(f"project_seed must be 'bsdf', 'emitter' or 'both' (got '{opts['project_seed']}')")
-        if seed < 0:
-            raise ValueError(f"seed must be >= 0 (got {seed})")
-        base = spp or self.spp  # every term's default, also when another term is switched off
-        interior = spp_interior if spp_interior is not None else base
-        spp_primary = spp_primary if spp_primary is not None else base
-        spp_boundary = spp_boundary if spp_boundary is not None else base
-        for name, v in (("spp_interior", interior), ("spp_primary", spp_primary), ("spp_boundary", spp_boundary)):
-            if v < 0:
-                raise ValueError(f"{name} must be >= 0 (got {v})")
-        for name in ("grid_octaves", "direction_octaves"):
-            if not (0 <= int(opts[name]) <= 8):
-                raise ValueError(f"{name} must be in [0, 8] (got {opts[name]})")
-        if int(opts["octree_training"]) < 0:
-            raise ValueError(f"octree_training must be >= 0 (got {opts['octree_training']})")
-        if not (0 <= int(opts["octree_refine_rounds"]) <= 8):
-            raise ValueError(f"octree_refine_rounds must be in [0, 8] (got {opts['octree_refine_rounds']})")
-        if not (float(opts["octree_refine_factor"]) > 0.0 and math.isfinite(float(opts["octree_refine_factor"]))):
-            raise ValueError(f"octree_refine_factor must be > 0 (got {opts['octree_refine_factor']})")
-        for name in ("grid_resolution", "guiding_spp", "octree_slices", "octree_leaf_samples", "direction_resolution"):
-            if int(opts[name]) < 1:
-                raise ValueError(f"{name} must be >= 1 (got {opts[name]})")
-        if opts["guiding_seeds"] is None:  # C++ reads 0 as "the guide's default"; an explicit 0 is refused
-            opts["guiding_seeds"] = 0  # the guide's default (render_diff.h, seeds_per_pixel)
-        elif int(opts["guiding_seeds"]) < 1:
-            raise ValueError(f"guiding_seeds must be >= 1 or None (got {opts['guiding_seeds']})")
-        if not (0.0 <= float(opts["octree_grid_mix"]) < 1.0):
-            raise ValueError(f"octree_grid_mix must be in [0, 1) (got {opts['octree_grid_mix']})")
-        if not (0.0 <= float(opts["direction_mix"]) < 1.0):
-            raise ValueError(f"direction_mix must be in [0, 1) (got {opts['direction_mix']})")
-        if not (0.0 <= float(opts["heightfield_interval_mix"]) <= 1.0):
-            raise ValueError(f"heightfield_interval_mix must be in [0, 1] (got {opts['heightfield_interval_mix']})")
-        if not (0.0 <= float(opts["theta_subrange"]) < 180.0):
-            raise ValueError(f"theta_subrange must be in [0, 180) degrees (got {opts['theta_subrange']})")
         self.update()
-        opts.update(spp_interior=interior, spp_primary=spp_primary, spp_boundary=spp_boundary, seed=seed)
-        return opts
+        return dict(options, spp=spp, seed=seed, spp_interior=spp_interior, spp_primary=spp_primary, spp_boundary=spp_boundary)
 
     def _report(self, stats: dict) -> None:
         self.last_stats = stats
@@ -188,13 +146,13 @@ class Scene:
         """Derivative image d(image)/d(theta) along ``tangents`` ({name: array shaped like the
         parameter}; differentiable parameters that are not listed get a zero tangent).
 
-        Terms: the interior term (``spp_interior`` paths per pixel, default ``spp`` or the scene's
-        sampler; 0 switches it off), the primary-visibility boundary term for silhouettes seen directly
-        (``spp_primary`` samples per pixel on average, default ``spp`` or the scene's as well; 0 switches it off), and the
-        indirect boundary term for mesh edges and sphere surfaces: shadows and silhouettes seen in
-        reflections (``spp_boundary``, default ``spp`` or the scene's as well; 0 switches it off).
+        Terms: the interior term (``spp_interior`` paths per pixel), the primary-visibility boundary
+        term for silhouettes seen directly (``spp_primary`` samples per pixel on average), and the
+        indirect boundary term for the boundaries of the shapes (mesh edges, sphere surfaces): shadows
+        and silhouettes seen in reflections (``spp_boundary``). Each count is ``spp`` when None, which
+        is the scene's sample count when None; 0 switches a term off.
 
-        Options (keyword arguments, defaults in ``Scene.DIFF_OPTIONS``):
+        Options (keyword arguments; their defaults are listed at the end):
 
         - ``guiding``: ``"none"`` samples the boundary sample space uniformly; ``"grid"`` uses a
           uniform grid of ``grid_resolution`` cells along the first axis (and R/4 x R/2 over the
@@ -203,38 +161,38 @@ class Scene:
           when a multiple of 8, at most ``octree_max_leaves`` leaves: beyond that it coarsens and the
           summary says so), sampled
           in a mixture with the projective grid built from the same projections
-          (``octree_grid_mix``, its share, default 0.5; 0: the octree alone). The grid covers the parts of
+          (``octree_grid_mix``, its share; 0: the octree alone). The grid covers the parts of
           a narrow feature next to the points that were found, which the octree's leaves there estimate as
           empty; without it the octree's errors are heavy-tailed (see docs/reports/projective/README.md).
-          ``octree_training`` (default 512) samples per pixel are first drawn from that grid and its
+          ``octree_training`` samples per pixel are first drawn from that grid and its
           direction histogram (below); those whose weight f / g is at least twice the mean (where that
           mixture under-samples the integrand) join the projections as points the octree splits at, each
           adding its value over one finest cell to its leaf's mass (a training round in the manner of
           practical path guiding, not in the paper; 0: projections only, as in the paper).
-          ``octree_refine_rounds`` (default 2; 0: off, as in the paper) rounds then split every leaf of more than
-          ``octree_refine_factor`` (default 1) times the mean leaf mass into 8 and estimate the new
+          ``octree_refine_rounds`` (0: off, as in the paper) rounds then split every leaf of more than
+          ``octree_refine_factor`` times the mean leaf mass into 8 and estimate the new
           leaves' masses from ``octree_leaf_samples`` uniform points each (resolution where the mass
           is), together with those leaves' face neighbours that are two or more levels coarser (a
           peak crossing into a large leaf is otherwise missed by its few points); not in the paper;
           docs/reports/projective/octree_refinement.md has the rounds' cost and gain.
-        - ``direction_mix`` (projective grid and octree, default 0.2): the share of the projections'
+        - ``direction_mix`` (projective grid and octree): the share of the projections'
           direction histogram in the mixture (the octree's and the grid's shares above are of the rest),
-          ``direction_resolution`` squared cells (default 256, at most 4096) over the sample space's second
+          ``direction_resolution`` squared cells (at most 4096) over the sample space's second
           and third coordinates (the direction for mesh edges), uniform along the first, and
-          ``direction_octaves`` (default 2) coarser histograms of a half, a quarter ... of that
+          ``direction_octaves`` coarser histograms of a half, a quarter ... of that
           resolution, with equal shares. In a near-specular chain every silhouette edge's integrand
           peaks at nearly the same directions, so it covers the peaks of edges the projections missed,
           which the grid and the octree hold at the defensive density only; the coarser histograms
           cover the GGX lobe's long tails next to the cells the projections filled (0: off;
           docs/reports/projective/README.md).
         - ``boundary_sampler``: the indirect term's points of the boundary sample space,
-          ``"stratified"`` (default: the first coordinate in one stratum per sample, the other two
+          ``"stratified"`` (the first coordinate in one stratum per sample, the other two
           from Owen-scrambled Sobol points, which the guides map axis by axis, so every region gets
           close to its expected share of the samples; core/math/sequence.h) or
           ``"independent"`` (independent uniform numbers). Both are unbiased.
         - ``projective`` (grid): fill the grid from projected seeds (True) or from
           ``guiding_spp`` random points per cell (False, the path-space baseline).
-        - ``grid_octaves`` (projective grid and the octree's grid, default 2): the projections fill
+        - ``grid_octaves`` (projective grid and the octree's grid): the projections fill
           a pyramid of grids, R 2^k cells along the first axis (R/4 2^k, R/2 2^k along the others)
           for k = -grid_octaves .. grid_octaves, sampled with equal shares (not in the paper: the
           fine levels resolve narrow lobes at no extra integrand evaluations, the coarse ones cover
@@ -259,10 +217,10 @@ class Scene:
         ``heightfield_curvature_test=False`` skips mipmap nodes by their maximum height only (not
         also by the second-derivative bound, core/geometry/shapes/heightfield/peak_search.h; for comparison), and
         ``theta_subrange`` > 0 searches only a sub-range of that many degrees per sample (App. C);
-        ``heightfield_interval_mix`` (default 0.5) is the share of the choice of a theta interval
+        ``heightfield_interval_mix`` is the share of the choice of a theta interval
         made uniformly over the intervals, the rest proportional to their widths (0: widths only,
         whose per-sample derivatives have a heavy tail at slivers next to silhouettes);
-        ``heightfield_camera_every_interval`` (default True) traces a camera path through every
+        ``heightfield_camera_every_interval`` traces a camera path through every
         interval of a pixel's theta range (Eq. 5) instead of choosing one (Eq. 6);
         ``heightfield_reparam=False`` holds the split points fixed, which drops the visibility part
         of the derivative (a diagnostic, like ``spp_boundary=0``).
@@ -308,6 +266,23 @@ class Scene:
     def __repr__(self) -> str:
         return (f"Scene('{self._native.source}', {self.width}x{self.height}, spp={self.spp}, "
                 f"shapes={self._native.shape_ids}, integrator={self._native.integrator})")
+
+
+def _defaults_text() -> str:
+    """The derivative options' defaults, from the C++ DiffOptions, as a docstring paragraph."""
+    rows = [f"{k}={v!r}" for k, v in Scene.DIFF_OPTIONS.items()]
+    lines, line = [], "       "
+    for r in rows:
+        if len(line) + len(r) + 2 > 100:
+            lines.append(line.rstrip())
+            line = "       "
+        line += " " + r + ","
+    lines.append(line.rstrip(","))
+    return "\n\n        Defaults (core/diff/diff_options.h):\n\n" + "\n".join(lines) + "\n"
+
+
+Scene.render_forward.__doc__ += _defaults_text()
+Scene.render_backward.__doc__ += _defaults_text()
 
 
 def load(path: str | os.PathLike) -> Scene:

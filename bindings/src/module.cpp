@@ -81,7 +81,8 @@ py::dict diff_stats_dict(const DiffStats& st) {
 
 // The derivative options Python sees (Scene.render_forward / render_backward keywords), each with
 // how it is read into DiffOptions and how its default is reported: bindings/limn/scene.py takes
-// its defaults from here (diff_option_defaults), so they live in the C++ structs only.
+// its defaults from here (diff_option_defaults), so they live in the C++ structs only, and the
+// core validates them (validate_diff_options). Python's None is converted where C++ has a sentinel.
 struct DiffOptionField {
   const char* name;
   std::function<void(DiffOptions&, const py::handle&)> set;
@@ -95,13 +96,41 @@ DiffOptionField field(const char* name, Member member) {
           [member](const DiffOptions& o) { return py::cast(T(member(const_cast<DiffOptions&>(o)))); }};
 }
 
+// A term's sample count: Python's None is C++'s -1 (the call's spp); Python gives no negative counts.
+template <typename Member>
+DiffOptionField term_count(const char* name, Member member) {
+  return {name,
+          [name, member](DiffOptions& o, const py::handle& v) {
+            if (v.is_none()) {
+              member(o) = -1;
+              return;
+            }
+            const int n = v.cast<int>();
+            if (n < 0) throw std::invalid_argument(std::string(name) + " must be >= 0 (None: spp; got " + std::to_string(n) + ")");
+            member(o) = n;
+          },
+          [member](const DiffOptions& o) {
+            const int n = member(const_cast<DiffOptions&>(o));
+            return n == -1 ? py::object(py::none()) : py::object(py::cast(n));
+          }};
+}
+
 const std::vector<DiffOptionField>& diff_option_fields() {
   static const std::vector<DiffOptionField> fields = {
-      field<int>("spp_interior", [](DiffOptions& o) -> int& { return o.spp_interior; }),
-      field<int>("spp_primary", [](DiffOptions& o) -> int& { return o.spp_primary; }),
-      field<int>("spp_boundary", [](DiffOptions& o) -> int& { return o.spp_boundary; }),
+      // None: the scene's sample count (C++ 0).
+      {"spp", [](DiffOptions& o, const py::handle& v) { o.spp = v.is_none() ? 0 : v.cast<int>(); },
+       [](const DiffOptions& o) { return o.spp == 0 ? py::object(py::none()) : py::object(py::cast(o.spp)); }},
+      // None: spp (C++ -1); 0 switches the term off.
+      term_count("spp_interior", [](DiffOptions& o) -> int& { return o.spp_interior; }),
+      term_count("spp_primary", [](DiffOptions& o) -> int& { return o.spp_primary; }),
+      term_count("spp_boundary", [](DiffOptions& o) -> int& { return o.spp_boundary; }),
       field<std::string>("boundary_sampler", [](DiffOptions& o) -> std::string& { return o.boundary_sampler; }),
-      field<uint64_t>("seed", [](DiffOptions& o) -> uint64_t& { return o.seed; }),
+      {"seed", [](DiffOptions& o, const py::handle& v) {
+         const long long seed = v.cast<long long>();
+         if (seed < 0) throw std::invalid_argument("seed must be >= 0 (got " + std::to_string(seed) + ")");
+         o.seed = uint64_t(seed);
+       },
+       [](const DiffOptions& o) { return py::cast(o.seed); }},
       field<int>("threads", [](DiffOptions& o) -> int& { return o.threads; }),
       field<std::string>("guiding", [](DiffOptions& o) -> std::string& { return o.guiding; }),
       field<bool>("projective", [](DiffOptions& o) -> bool& { return o.projective; }),
@@ -110,7 +139,11 @@ const std::vector<DiffOptionField>& diff_option_fields() {
       field<int>("grid_octaves", [](DiffOptions& o) -> int& { return o.grid_octaves; }),
       field<int>("guiding_spp", [](DiffOptions& o) -> int& { return o.guiding_spp; }),
       // 0: the guide's default (seeds_per_pixel); Python says None.
-      {"guiding_seeds", [](DiffOptions& o, const py::handle& v) { o.guiding_seeds = v.is_none() ? 0 : v.cast<int>(); },
+      {"guiding_seeds", [](DiffOptions& o, const py::handle& v) {
+         if (!v.is_none() && v.cast<int>() < 1)
+           throw std::invalid_argument("guiding_seeds must be >= 1 or None (got " + std::to_string(v.cast<int>()) + ")");
+         o.guiding_seeds = v.is_none() ? 0 : v.cast<int>();
+       },
        [](const DiffOptions& o) { return o.guiding_seeds == 0 ? py::object(py::none()) : py::object(py::cast(o.guiding_seeds)); }},
       field<int>("octree_slices", [](DiffOptions& o) -> int& { return o.octree.slices; }),
       field<int>("octree_max_depth", [](DiffOptions& o) -> int& { return o.octree.max_depth; }),
@@ -138,8 +171,7 @@ const std::vector<DiffOptionField>& diff_option_fields() {
   return fields;
 }
 
-// DiffOptions from the keyword options (scene.py validates and fills them; an unknown key here is
-// a binding bug, reported as such).
+// DiffOptions from the keyword options (an unknown key is refused; the core validates the values).
 DiffOptions diff_options(const py::dict& options) {
   DiffOptions o;
   const auto& fields = diff_option_fields();

@@ -1,6 +1,8 @@
 // Options of render_forward / render_backward (core/diff/render_diff.h): which terms, how many
 // samples, and how the indirect boundary term is guided. The defaults stated here are the only
-// ones: the Python layer reads them (limn._core.diff_option_defaults) and forwards user values.
+// ones, and validate_diff_options() the only checks: the Python layer reads the defaults
+// (limn._core.diff_option_defaults), forwards user values under the same names, and shows the
+// defaults in Scene.render_forward's docstring.
 #pragma once
 #include <algorithm>
 #include <array>
@@ -45,9 +47,10 @@ constexpr int kDirectionOctaves = 2;
 constexpr int kGridOctaves = 2;
 
 struct DiffOptions {
-  int spp_interior = -1;  // interior-term paths per pixel (-1: the scene's sample count; 0: off)
-  int spp_primary = 0;    // primary-visibility boundary samples, per pixel on average (0: off)
-  int spp_boundary = 0;   // indirect boundary samples, per pixel on average (0: off)
+  int spp = 0;            // samples per pixel of every term that does not set its own (0: the scene's sample count)
+  int spp_interior = -1;  // interior-term paths per pixel (-1: spp; 0: off)
+  int spp_primary = -1;   // primary-visibility boundary samples, per pixel on average (-1: spp; 0: off)
+  int spp_boundary = -1;  // indirect boundary samples, per pixel on average (-1: spp; 0: off)
   // Indirect boundary: the call's points of [0,1)^3 "independent" or "stratified" (core/math/sequence.h).
   std::string boundary_sampler = "stratified";
   std::string guiding = "none";  // indirect boundary: "none" (uniform), "grid" or "octree" (core/guiding/)
@@ -103,10 +106,11 @@ struct DiffStats {
   std::vector<std::string> summary;  // what was computed and what was left out, and why
 };
 
-// Interior-term paths per pixel: spp_interior, or the scene's sample count for -1.
-inline int interior_spp(const Scene& scene, const DiffOptions& o) { return o.spp_interior < 0 ? scene.spp : o.spp_interior; }
-
-// Throws std::invalid_argument naming the scene and the bad option value.
+// Throws std::invalid_argument naming the scene, the option (its Python keyword) and the bad value.
 void validate_diff_options(const Scene& scene, const DiffParams& params, const DiffOptions& options);
+
+// The options with every sample count resolved: spp from the scene when 0, each term's count from
+// spp when -1.
+DiffOptions with_sample_counts(const Scene& scene, DiffOptions options);
 
 }  // namespace limn

@@ -243,8 +243,9 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
 }  // namespace
 
 Image render_forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent,
-                     const DiffOptions& opt, DiffStats* stats) {
-  validate_diff_options(scene, params, opt);
+                     const DiffOptions& options, DiffStats* stats) {
+  validate_diff_options(scene, params, options);
+  const DiffOptions opt = with_sample_counts(scene, options);
   if (tangent.size() != params.slot_count())
     throw std::invalid_argument(scene.source + ": tangent has " + std::to_string(tangent.size()) + " values, expected " +
                                 std::to_string(params.slot_count()));
@@ -252,7 +253,7 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
   const auto lock = scene.render_lock();
   const int max_depth = effective_max_depth(scene, opt.max_depth);
   const int W = scene.camera.width, H = scene.camera.height;
-  const int spp = interior_spp(scene, opt);
+  const int spp = opt.spp_interior;
   Image img{W, H, std::vector<float>(size_t(W) * H * 3, 0.0f)};
   std::atomic<uint64_t> rays{0}, invalid{0};
   const std::unique_ptr<HeightfieldEstimator> hfe =
@@ -313,8 +314,9 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
 }
 
 std::vector<double> render_backward(const Scene& scene, const DiffParams& params, const Image& adjoint,
-                                    const DiffOptions& opt, DiffStats* stats) {
-  validate_diff_options(scene, params, opt);
+                                    const DiffOptions& options, DiffStats* stats) {
+  validate_diff_options(scene, params, options);
+  const DiffOptions opt = with_sample_counts(scene, options);
   const int W = scene.camera.width, H = scene.camera.height;
   if (adjoint.width != W || adjoint.height != H)
     throw std::invalid_argument(scene.source + ": adjoint image is " + std::to_string(adjoint.width) + "x" +
@@ -324,7 +326,7 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
   const auto start = std::chrono::steady_clock::now();
   const auto lock = scene.render_lock();
   const int max_depth = effective_max_depth(scene, opt.max_depth);
-  const int spp = interior_spp(scene, opt);
+  const int spp = opt.spp_interior;
   ThreadSums grads(params.slot_count());
   std::atomic<uint64_t> rays{0}, invalid{0};
   const std::unique_ptr<HeightfieldEstimator> hfe =
