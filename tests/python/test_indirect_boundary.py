@@ -7,6 +7,8 @@ import os
 import warnings
 from functools import partial
 
+import re
+
 import numpy as np
 import pytest
 
@@ -312,16 +314,28 @@ def test_grid_octaves_option():
 
 
 def test_option_defaults_are_the_core_ones():
-    """Scene.DIFF_OPTIONS comes from the C++ DiffOptions (one place for every default), and an
-    option given in Python reaches the guide: the octree's uniform samples per leaf, said in the
-    summary, at the default and when set."""
+    """The C++ DiffOptions states every default (help(Scene.render_forward) lists them) and
+    validates every value (the Python layer only converts): an option given in Python reaches the
+    guide, the octree's uniform samples per leaf, said in the summary at the default and when set;
+    a bad value is refused by the core, naming the option."""
     from limn import _core
     core = _core.diff_option_defaults()
-    assert set(limn.Scene.DIFF_OPTIONS) == set(core) - {"spp_interior", "spp_primary", "spp_boundary", "seed"}
+    doc = limn.Scene.render_forward.__doc__
+    for name, value in core.items():
+        if name in ("spp", "spp_interior", "spp_primary", "spp_boundary", "seed"):
+            continue  # arguments of their own, documented in the signature
+        shown = f"{name}={value!r}" if not isinstance(value, float) else f"{name}={float(f'{value:.6g}')!r}"
+        assert shown in doc, f"{shown} not in help(Scene.render_forward)"
     scene, name, t = moving_box()
     guide_line = partial(indirect_summary, scene, {name: t}, guiding="octree", octree_training=0)
     assert f"{core['octree_leaf_samples']} uniform samples per leaf" in guide_line()
     assert "3 uniform samples per leaf" in guide_line(octree_leaf_samples=3)
+    for option, bad, message in (("octree_slices", 0, "octree_slices must be in [1, 65536]"),
+                                 ("octree_refine_factor", float("nan"), "octree_refine_factor must be > 0"),
+                                 ("theta_subrange", 180.0, "theta_subrange must be in [0, 180)"),
+                                 ("guide_refresh_threshold", -1.0, "guide_refresh_threshold must be finite and >= 0")):
+        with pytest.raises(ValueError, match=re.escape(message)):
+            scene.render_forward({name: t}, spp=1, **{option: bad})
 
 
 def test_direction_mix_option():

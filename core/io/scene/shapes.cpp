@@ -4,16 +4,12 @@
 
 namespace limn::io_detail {
 
-// One line per shape kind: type name, loader, whether it may carry an area emitter.
-const std::map<std::string, ShapeKind>& shape_kinds() {
-  static const std::map<std::string, ShapeKind> table = {
-      {"obj", {load_mesh_shape, true}},
-      {"ply", {load_mesh_shape, true}},
-      {"mesh", {load_mesh_shape, true}},
-      {"rectangle", {load_mesh_shape, true}},
-      {"cube", {load_mesh_shape, true}},
-      {"sphere", {load_sphere, true}},
-      {"heightfield", {load_heightfield, false}},
+// One line per scene-format type: its loader.
+const std::map<std::string, ShapeLoader>& shape_kinds() {
+  static const std::map<std::string, ShapeLoader> table = {
+      {"obj", load_mesh_shape},     {"ply", load_mesh_shape},  {"mesh", load_mesh_shape},
+      {"rectangle", load_mesh_shape}, {"cube", load_mesh_shape}, {"sphere", load_sphere},
+      {"heightfield", load_heightfield},
   };
   return table;
 }
@@ -27,7 +23,8 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
   const Transform to_world = p.transform("to_world");
   auto kind = shape_kinds().find(type);
   if (kind == shape_kinds().end()) p.fail("unknown shape type '" + type + "' (known: " + known_of(Category::Shape) + ")");
-  shape.geometry = kind->second.load(p, type, to_world);
+  shape.geometry = kind->second(p, type, to_world);
+  const bool can_emit = shape.visit([](const auto& g) { return std::decay_t<decltype(g)>::can_emit; });
 
   // Nested bsdf (inline or reference) and area emitter.
   for (const auto& [key, child] : p.children()) {
@@ -47,7 +44,7 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       shape.bsdf = add_bsdf(ctx, load_bsdf(ctx, *child, nested_id(p, *child, id)));
     } else if (cat->second == Category::Emitter) {
       if (ctype != "area") p.fail("only 'area' emitters can be attached to a shape (got '" + ctype + "' under '" + key + "')");
-      if (!kind->second.area_emitter) p.fail("a " + type + " cannot be an area emitter (under '" + key + "')");
+      if (!can_emit) p.fail("a " + type + " cannot be an area emitter (under '" + key + "')");
       if (shape.emitter >= 0) p.fail("has more than one emitter");
       Props ep(ctx, *child, describe("emitter", id, ctype));
       AreaEmitter a;

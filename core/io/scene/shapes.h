@@ -12,13 +12,9 @@ namespace limn::io_detail {
 // Builds the geometry of a shape of type `type`; to_world has been read already.
 using ShapeLoader = ShapeGeometry (*)(const Props& p, const std::string& type, const Transform& to_world);
 
-struct ShapeKind {
-  ShapeLoader load;
-  bool area_emitter;  // whether an area emitter may be nested in it
-};
-
-// Type name -> kind, for every shape type of the scene format.
-const std::map<std::string, ShapeKind>& shape_kinds();
+// Type name -> loader, for every shape type of the scene format. Whether the shape may carry an
+// area emitter is its kind's (can_emit, core/geometry/shapes/shape.h).
+const std::map<std::string, ShapeLoader>& shape_kinds();
 
 // obj, ply, mesh, rectangle, cube (meshes.cpp).
 ShapeGeometry load_mesh_shape(const Props& p, const std::string& type, const Transform& to_world);
