@@ -19,7 +19,12 @@ def main(folder: str) -> int:
             print(f"{name[:-4]:>12}: no report (the suite did not run to the end)")
             ok = False
             continue
-        root = ET.parse(path).getroot()
+        try:
+            root = ET.parse(path).getroot()
+        except ET.ParseError:
+            print(f"{name[:-4]:>12}: an unreadable report (the suite crashed while writing it)")
+            ok = False
+            continue
         cases = list(root.iter("testcase"))
         bad = [c for c in cases if c.find("failure") is not None or c.find("error") is not None]
         skip = [c for c in cases if c.find("skipped") is not None]
