@@ -23,6 +23,7 @@ suite "Python package (pytest)" "$PY" -m pytest -q tests/python --junitxml="$RES
 suite "Blender 3.4 add-on (Debian blender)" blender -b --factory-startup -noaudio --python-exit-code 1 \
       --python tests/blender/run.py -- --junitxml="$RESULTS/blender-3.4.xml"
 suite "Blender 4.5 LTS add-on (bpy module)" "$PY" tests/blender/run.py --junitxml="$RESULTS/blender-bpy.xml"
+suite "Blender 3.4 in a window (Xvfb)" "$PY" -m pytest -q -p no:cacheprovider tests/blender/window --junitxml="$RESULTS/blender-window.xml"
 
 printf '\n'
 "$PY" tests/summarize.py "$RESULTS" || status=1

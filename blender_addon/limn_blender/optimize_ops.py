@@ -246,6 +246,9 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
     progress(iteration, loss) may return False to stop. Returns {"losses": [...], "seconds": ...,
     "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD"}."""
     problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image)
+    running = jobs.busy(problem.keys)
+    if running is not None:  # a job in the UI writes the same object
+        raise jobs.JobBusy(running)
 
     def callback(it, loss, x):
         return None if progress is None else progress(it, loss)
@@ -298,7 +301,7 @@ class OptimizeJob(jobs.Job):
         self._settings = (spp, lr, lambda_)
         self._lock = threading.Lock()
         self._state = {"it": -1, "loss": float("nan"), "x": None}
-        self._written = -2
+        self._written = -1
         self.writes = 0  # how often poll() wrote the result (progress shown in the viewport)
         self._end = None  # the final poll() result, once the end was handled
 

@@ -1,6 +1,6 @@
-"""Runs one scenario of the window tests inside Blender with a real window (under Xvfb):
+"""Runs one scenario of the window tests inside Blender with a real window (on an Xvfb display :N):
 
-    xvfb-run -a -s "-screen 0 1280x800x24" blender --factory-startup -noaudio \
+    DISPLAY=:N blender --factory-startup -noaudio \
         --python tests/blender/window/driver.py -- SCENARIO OUTDIR
 
 The scenario is a generator (scenarios.py) stepped by one persistent bpy.app.timers function, so

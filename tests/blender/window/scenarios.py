@@ -157,6 +157,13 @@ def second_optimise(d):
     addon = yield from _setup(d)
     ball = _optimisation(d, addon, iterations=60)
     bpy.context.scene.render.engine = "BLENDER_WORKBENCH"  # fewer render panels: limn's is in view
+    with bpy.context.temp_override(**d.properties_override()):
+        bpy.ops.screen.screen_full_area()  # the Properties editor fills the window (for the screenshots)
+    yield 0.3
+    with bpy.context.temp_override(**d.properties_override()):
+        for _ in range(10):               # to the limn panel, the last one
+            bpy.ops.view2d.scroll_down(page=True)
+    yield 0.3
     start = _vertices(ball.data)
     before = {t.ident for t in threading.enumerate()}
     d.record(first=str(d.call(bpy.ops.limn.optimize)))
@@ -203,3 +210,49 @@ def save_and_reopen(d):
             img.pixels.foreach_get(px)
         d.record(size_after=list(img.size), mean_after=float(px.mean()),
                  same_pixels=bool(size_ok and np.allclose(px, saved, atol=1e-6, rtol=0)))
+
+
+# ---- Esc from the keyboard (xdotool: real X input) ---------------------------------------------------
+def escape_mid_optimise(d):
+    import subprocess
+    addon = yield from _setup(d)
+    ball = _optimisation(d, addon, iterations=400)
+    start = _vertices(ball.data)
+    before = {t.ident for t in threading.enumerate()}
+    d.record(invoke=str(d.call(bpy.ops.limn.optimize)))
+    moved = yield from _wait_for(lambda: not np.array_equal(_vertices(ball.data), start), 30)
+    # The pointer over Blender's window (no window manager: keys go to the window under it).
+    subprocess.run(["xdotool", "mousemove", "400", "300"], check=True, timeout=10)
+    yield 0.2
+    t0 = time.time()
+    subprocess.run(["xdotool", "key", "Escape"], check=True, timeout=10)
+    jobs = getattr(addon, "jobs", None)    # the add-on's job registry, where there is one
+    if jobs is not None:
+        yield from _wait_for(lambda: any(j.cancelled for j in jobs.running()) or not jobs.running(), 20)
+        d.record(escape_seen_seconds=time.time() - t0)
+    stopped = yield from _wait_for(lambda: not _workers(before), 20)
+    yield 0.5                          # the modal operator's last tick writes the last state
+    d.record(moved_before_escape=moved, workers_stopped=stopped, stop_seconds=time.time() - t0,
+             kept=not np.array_equal(_vertices(ball.data), start))
+
+
+def ctrl_q_mid_optimise(d):
+    """Ctrl+Q from the keyboard while an optimisation runs, then "Don't Save" in the dialog."""
+    import subprocess
+    addon = yield from _setup(d)
+    ball = _optimisation(d, addon, iterations=400)
+    start = _vertices(ball.data)
+    before = {t.ident for t in threading.enumerate()}
+    d.record(invoke=str(d.call(bpy.ops.limn.optimize)))
+    moved = yield from _wait_for(lambda: not np.array_equal(_vertices(ball.data), start), 30)
+    d.record(moved_before_quit=moved, workers_at_quit=len(_workers(before)))
+    bpy.ops.ed.undo_push(message="an edit")  # unsaved changes: Ctrl+Q asks whether to save
+    subprocess.run(["xdotool", "mousemove", "640", "400"], check=True, timeout=10)
+    yield 0.2
+    subprocess.run(["xdotool", "key", "ctrl+q"], check=True, timeout=10)
+    yield 2.0                          # "Save changes before closing?": Don't Save, Cancel, Save
+    d.screenshot("quit_dialog")
+    d.record(workers_with_dialog=len(_workers(before)), quit_at=time.time())
+    subprocess.run(["xdotool", "key", "d"], check=True, timeout=10)  # the dialog's accelerator of Don't Save
+    yield 60                           # Blender quits; the driver's own quit is not reached
+    d.record(still_running_after_dont_save=True)
