@@ -13,8 +13,10 @@ No job may outlive what it depends on. They are cancelled and joined (waited for
   still running then would be killed while it holds C++ frames (Python 3.11 ends such threads
   with a forced unwind, which limn's callback catches: "FATAL: exception not rethrown", abort)
   or would come back into a finalised interpreter (segmentation fault).
-Neither Blender 3.4 nor 4.5 has a quit handler in bpy.app.handlers; quit reaches the add-on only
-through cancel() and atexit (checked in a window: tests/blender/window).
+Neither Blender 3.4 nor 4.5 has a quit handler in bpy.app.handlers. Quitting Blender 3.4 in a
+window with a job running reaches the add-on, in this order, through the operator's cancel(),
+unregister() (WM_exit runs addon_utils.disable_all()) and atexit; each alone gives a clean exit
+(checked in a window: tests/blender/window). The bpy module (4.5) reaches it through atexit.
 
 One job per datablock at a time: a job names the datablocks it writes (`keys`), and
 `busy(keys)` tells whether a running job holds one of them."""
