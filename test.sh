@@ -29,6 +29,8 @@ suite "Python package (pytest)" python.xml "$PY" -m pytest -q tests/python --jun
 suite "Blender 3.4 add-on (Debian blender)" blender-3.4.xml blender -b --factory-startup -noaudio --python-exit-code 1 \
       --python tests/blender/run.py -- --junitxml="$RESULTS/blender-3.4.xml"
 suite "Blender 4.5 LTS add-on (bpy module)" blender-bpy.xml "$PY" tests/blender/run.py --junitxml="$RESULTS/blender-bpy.xml"
+suite "Blender 3.4 in a window (Xvfb)" blender-window.xml "$PY" -m pytest -q -p no:cacheprovider tests/blender/window \
+      --junitxml="$RESULTS/blender-window.xml"
 
 if [ "$SANITIZE" = 1 ]; then
   # The core, its doctests and the Python module built with ASan + UBSan (any report aborts the
