@@ -157,7 +157,10 @@ class Scene:
 
         Options (keyword arguments; their defaults are listed at the end):
 
-        - ``guiding``: ``"none"`` samples the boundary sample space uniformly; ``"grid"`` uses a
+        - ``guiding``: ``"auto"`` (the default) takes the projective grid below 256 boundary samples
+          per pixel and the octree from there (docs/reports/default_estimator.md: at low budgets the
+          octree's set-up outweighs its lower error), and says so in the summary; ``"none"``
+          samples the boundary sample space uniformly; ``"grid"`` uses a
           uniform grid of ``grid_resolution`` cells along the first axis (and R/4 x R/2 over the
           others); ``"octree"`` an adaptive octree (``octree_slices`` slabs along the first axis,
           depth <= ``octree_max_depth``, ``octree_leaf_samples`` uniform samples per leaf, one per octant
@@ -208,8 +211,12 @@ class Scene:
           projections where the integrand is non-zero, a few per cent of them).
         - ``guide_refresh`` k > 0 keeps the guide in ``Scene.guide_cache`` and reuses it for up to k
           calls while the settings are the same and no moving geometry moved by more than
-          ``guide_refresh_threshold`` of its bounding-box diagonal (optimisation loops); 0 builds
+          ``guide_refresh_threshold`` of its bounding-box diagonal (optimisation loops and repeated
+          calls; a kept guide is still a valid density, so the estimate stays unbiased); 0 builds
           it every call.
+        - ``shading_horizon``: at smooth-shaded (interpolated-normal) reflective surfaces the interior
+          term adds the boundary term of the geometric horizon, where the leak test cuts the shading
+          hemisphere (docs/derivatives.md, "Smooth shading"); False leaves it out (a diagnostic).
         - ``max_depth`` overrides the path integrator's longest path for every term;
           ``threads`` (0: all cores).
 

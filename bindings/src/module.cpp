@@ -164,6 +164,7 @@ const std::vector<DiffOptionField>& diff_option_fields() {
       field<float>("heightfield_interval_mix", [](DiffOptions& o) -> float& { return o.heightfield.interval_uniform_share; }),
       field<bool>("heightfield_camera_every_interval", [](DiffOptions& o) -> bool& { return o.heightfield.camera_every_interval; }),
       field<float>("theta_subrange", [](DiffOptions& o) -> float& { return o.heightfield.theta_subrange_degrees; }),
+      field<bool>("shading_horizon", [](DiffOptions& o) -> bool& { return o.shading_horizon; }),
       // The scene's own max_depth unless set; Python says None.
       {"max_depth", [](DiffOptions& o, const py::handle& v) { o.max_depth = v.is_none() ? kSceneMaxDepth : v.cast<int>(); },
        [](const DiffOptions& o) { return o.max_depth == kSceneMaxDepth ? py::object(py::none()) : py::object(py::cast(o.max_depth)); }},

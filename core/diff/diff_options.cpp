@@ -34,8 +34,8 @@ void validate_diff_options(const Scene& scene, const DiffParams& params, const D
   // Indirect boundary term: sampling and guides.
   require(opt.boundary_sampler == "independent" || opt.boundary_sampler == "stratified", scene, "boundary_sampler",
           "'independent' or 'stratified'", opt.boundary_sampler);
-  require(opt.guiding == "none" || opt.guiding == "grid" || opt.guiding == "octree", scene, "guiding", "'none', 'grid' or 'octree'",
-          opt.guiding);
+  require(opt.guiding == "auto" || opt.guiding == "none" || opt.guiding == "grid" || opt.guiding == "octree", scene, "guiding",
+          "'auto', 'none', 'grid' or 'octree'", opt.guiding);
   parse_seed_segments(opt.project_seed, scene.source);
   require(opt.grid_resolution >= 1, scene, "grid_resolution", ">= 1", opt.grid_resolution);
   const std::array<int, 3> cells = grid_cells(opt);
@@ -69,10 +69,15 @@ void validate_diff_options(const Scene& scene, const DiffParams& params, const D
           "theta_subrange", "in [0, 180) degrees", opt.heightfield.theta_subrange_degrees);
 }
 
-DiffOptions with_sample_counts(const Scene& scene, DiffOptions o) {
+DiffOptions resolve_options(const Scene& scene, DiffOptions o) {
   if (o.spp == 0) o.spp = scene.spp;
   for (int* count : {&o.spp_interior, &o.spp_primary, &o.spp_boundary})
     if (*count < 0) *count = o.spp;
+  if (o.guiding == "auto") {
+    o.guiding = o.spp_boundary >= kAutoOctreeSpp ? "octree" : "grid";
+    o.projective = true;
+    o.guiding_auto = true;
+  }
   return o;
 }
 

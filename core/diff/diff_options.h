@@ -45,6 +45,13 @@ constexpr int kDirectionOctaves = 2;
 // The projective grid's pyramid (core/guiding/grid.h, GridPyramid): grids from R/4 to 4R cells
 // along each axis; docs/reports/projective/README.md.
 constexpr int kGridOctaves = 2;
+// guiding "auto": the octree from this many boundary samples per pixel, the projective grid below
+// (docs/reports/default_estimator.md): the octree's error is lower per sample, but its set-up costs
+// seconds where the grid's costs a tenth of that, which decides at low budgets.
+constexpr int kAutoOctreeSpp = 256;
+// Calls a guide is kept for by default (guide_refresh), while the geometry moves less than
+// guide_refresh_threshold of its size: optimisation steps and repeated calls reuse it.
+constexpr int kGuideRefresh = 8;
 
 struct DiffOptions {
   int spp = 0;            // samples per pixel of every term that does not set its own (0: the scene's sample count)
@@ -53,7 +60,10 @@ struct DiffOptions {
   int spp_boundary = -1;  // indirect boundary samples, per pixel on average (-1: spp; 0: off)
   // Indirect boundary: the call's points of [0,1)^3 "independent" or "stratified" (core/math/sequence.h).
   std::string boundary_sampler = "stratified";
-  std::string guiding = "none";  // indirect boundary: "none" (uniform), "grid" or "octree" (core/guiding/)
+  // Indirect boundary: "auto" (the projective grid, or the octree from kAutoOctreeSpp samples per
+  // pixel), "none" (uniform), "grid" or "octree" (core/guiding/).
+  std::string guiding = "auto";
+  bool guiding_auto = false;     // set by resolve_options: guiding was "auto" (the summary says so)
   bool projective = true;        // grid: fill from projected seeds (false: the path-space baseline)
   std::string project_seed = "both";  // seed segments from "bsdf", "emitter" or "both" (core/diff/seeding.h)
   int grid_resolution = 64;      // grid cells along the first axis; (R/4, R/2) along the direction axes
@@ -78,10 +88,13 @@ struct DiffOptions {
   int direction_resolution = kDirectionResolution;
   int direction_octaves = kDirectionOctaves;  // coarser histograms beside it (GridPyramid levels)
   GuideCache* guide_cache = nullptr;  // where guides are kept between calls (null: rebuilt every call)
-  int guide_refresh = 0;              // rebuild after this many calls (0: every call)
+  int guide_refresh = kGuideRefresh;  // rebuild after this many calls (0: every call); needs guide_cache
   float guide_refresh_threshold = 0.02f;
   HeightfieldOptions heightfield;  // scenes with a heightfield and differentiable geometry
   int max_depth = kSceneMaxDepth;  // path integrator: overrides the scene's max_depth for every term
+  // Interior term: the boundary term of smooth shading's geometric horizon at smooth-shaded,
+  // reflective vertices (core/diff/terms/interior.cpp, horizon_term); false leaves it out.
+  bool shading_horizon = true;
   uint64_t seed = 0;
   int threads = 0;
   std::function<bool(float)> progress;
@@ -109,8 +122,8 @@ struct DiffStats {
 // Throws std::invalid_argument naming the scene, the option (its Python keyword) and the bad value.
 void validate_diff_options(const Scene& scene, const DiffParams& params, const DiffOptions& options);
 
-// The options with every sample count resolved: spp from the scene when 0, each term's count from
-// spp when -1.
-DiffOptions with_sample_counts(const Scene& scene, DiffOptions options);
+// The options as a call uses them: spp from the scene when 0, each term's count from spp when -1,
+// guiding "auto" resolved.
+DiffOptions resolve_options(const Scene& scene, DiffOptions options);
 
 }  // namespace limn

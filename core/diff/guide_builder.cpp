@@ -173,7 +173,7 @@ CallGuide guide_for_call(const Scene& scene, const DiffParams& params, const Ind
 
 std::shared_ptr<const BoundaryGuide> build_boundary_guide(const Scene& scene, const IndirectBoundary& indirect, const DiffOptions& options,
                                                           std::string* origin) {
-  const DiffOptions opt = with_sample_counts(scene, options);
+  const DiffOptions opt = resolve_options(scene, options);
   if (opt.guiding != "grid" && opt.guiding != "octree")
     throw std::invalid_argument(scene.source + ": build_boundary_guide needs guiding 'grid' or 'octree' (got '" + opt.guiding + "')");
   CallGuide terms;

@@ -73,7 +73,10 @@ struct BoundaryTerms {
 std::vector<std::string> summarize(const Scene& scene, const DiffParams& params, int spp, const DiffOptions& opt,
                                    const PrimaryBoundary* primary, const IndirectBoundary* indirect, const BoundaryTerms* terms) {
   std::vector<std::string> s;
-  s.push_back(spp > 0 ? "interior term: " + std::to_string(spp) + " paths per pixel, material-form replay"
+  s.push_back(spp > 0 ? "interior term: " + std::to_string(spp) + " paths per pixel, material-form replay" +
+                            (params.any_geometry() ? std::string(opt.shading_horizon ? ", with the smooth-shading horizon term"
+                                                                                     : ", smooth-shading horizon term off (shading_horizon)")
+                                                   : std::string())
                       : std::string("interior term: off (spp_interior 0)"));
   if (!params.any_geometry()) {
     s.push_back("boundary terms: skipped, no differentiable geometry (nothing can change visibility)");
@@ -99,7 +102,9 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
     const CallGuide* g = terms && terms->guide.guide ? &terms->guide : nullptr;
     s.push_back("indirect boundary: " + std::to_string(opt.spp_boundary) + " samples per pixel over " + segments + " (" +
                 std::to_string(indirect->space().static_count()) + " of them static: they count where a moving surface ends the segment), " +
-                (g ? "guiding " + g->guide->describe() + ", " + g->origin + ", built in " + std::to_string(g->seconds) + " s" + g->reuse +
+                (g ? std::string(opt.guiding_auto ? "guiding auto (" + std::to_string(opt.spp_boundary) + " samples per pixel: " +
+                                                        (opt.guiding == "octree" ? "the octree" : "the projective grid") + "): " : "") +
+                         "guiding " + g->guide->describe() + ", " + g->origin + ", built in " + std::to_string(g->seconds) + " s" + g->reuse +
                          ", " + std::to_string(g->guide->memory_bytes() / 1024) + " KiB, 10% uniform defensive mixture"
                    : std::string("guiding none (uniform)")));
     for (const std::string& id : indirect->space().left_out())
@@ -154,19 +159,19 @@ void fill_stats(DiffStats* stats, std::chrono::steady_clock::time_point start, u
 
 // One camera path of pixel (x, y) replayed on a cleared tape (the same film sample as render()).
 ad::V3<ad::Var> replay_camera_path(const Scene& scene, const DiffParams& params, int x, int y, Pcg32& rng, PathInputs& in,
-                                   PathCounters& counters, int max_depth) {
+                                   PathCounters& counters, int max_depth, bool horizon) {
   ad::Tape::current().clear();
   in.clear();
   const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();
-  return interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters, max_depth);
+  return interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters, max_depth, horizon);
 }
 
 // One camera sample of pixel (x, y) on a cleared tape: the heightfield estimator's, or the
 // interior term's replay.
 ad::V3<ad::Var> camera_path(const Scene& scene, const DiffParams& params, const HeightfieldEstimator* hfe,
                             tbb::enumerable_thread_specific<HeightfieldCounters>& hf_counters, int x, int y, Pcg32& rng,
-                            PathInputs& in, PathCounters& counters, int max_depth) {
-  if (!hfe) return replay_camera_path(scene, params, x, y, rng, in, counters, max_depth);
+                            PathInputs& in, PathCounters& counters, int max_depth, bool horizon) {
+  if (!hfe) return replay_camera_path(scene, params, x, y, rng, in, counters, max_depth, horizon);
   ad::Tape::current().clear();
   in.clear();
   HeightfieldCounters& c = hf_counters.local();
@@ -247,7 +252,7 @@ namespace {
 Image forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent, const DiffOptions& options,
               DiffStats* stats) {
   validate_diff_options(scene, params, options);
-  const DiffOptions opt = with_sample_counts(scene, options);
+  const DiffOptions opt = resolve_options(scene, options);
   if (tangent.size() != params.slot_count())
     throw std::invalid_argument(scene.source + ": tangent has " + std::to_string(tangent.size()) + " values, expected " +
                                 std::to_string(params.slot_count()));
@@ -270,7 +275,7 @@ Image forward(const Scene& scene, const DiffParams& params, const std::vector<do
     double sum[3] = {0, 0, 0};
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      const ad::V3<ad::Var> L = camera_path(scene, params, hfe.get(), hf_counters, x, y, rng, in, counters, max_depth);
+      const ad::V3<ad::Var> L = camera_path(scene, params, hfe.get(), hf_counters, x, y, rng, in, counters, max_depth, opt.shading_horizon && params.any_geometry());
       double d[3] = {0, 0, 0};
       bool ok = std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v);
       for (int c = 0; c < 3 && ok; ++c) {
@@ -318,7 +323,7 @@ Image forward(const Scene& scene, const DiffParams& params, const std::vector<do
 std::vector<double> backward(const Scene& scene, const DiffParams& params, const Image& adjoint, const DiffOptions& options,
                              DiffStats* stats) {
   validate_diff_options(scene, params, options);
-  const DiffOptions opt = with_sample_counts(scene, options);
+  const DiffOptions opt = resolve_options(scene, options);
   const int W = scene.camera.width, H = scene.camera.height;
   if (adjoint.width != W || adjoint.height != H)
     throw std::invalid_argument(scene.source + ": adjoint image is " + std::to_string(adjoint.width) + "x" +
@@ -344,7 +349,7 @@ std::vector<double> backward(const Scene& scene, const DiffParams& params, const
     PathCounters counters;
     uint64_t bad = 0;
     for (int s = 0; s < spp; ++s) {
-      const ad::V3<ad::Var> L = camera_path(scene, params, hfe.get(), hf_counters, x, y, rng, in, counters, max_depth);
+      const ad::V3<ad::Var> L = camera_path(scene, params, hfe.get(), hf_counters, x, y, rng, in, counters, max_depth, opt.shading_horizon && params.any_geometry());
       if (!(std::isfinite(L.x.v) && std::isfinite(L.y.v) && std::isfinite(L.z.v))) {
         ++bad;
         continue;

@@ -18,7 +18,8 @@ from .. import fd, load
 METHODS = {
     "interior": {"spp_primary": 0, "spp_boundary": 0},
     "primary": {"spp_boundary": 0},
-    "full": {},                                                    # indirect term, guiding none
+    "full": {"guiding": "none"},                                   # indirect term, uniform boundary sampling
+    "default": {},                                                 # the defaults (guiding "auto")
     "grid": {"guiding": "grid", "projective": False},              # path-space baseline, 4 points per cell
     "grid10x": {"guiding": "grid", "projective": False, "guiding_spp": 40},
     "projective_grid": {"guiding": "grid", "projective": True},

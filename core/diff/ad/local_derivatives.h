@@ -74,22 +74,23 @@ T fresnel_dielectric(const T& cos_i, double eta) {
 }
 
 // ---- microfacets ----------------------------------------------------------------------------------
+// As Microfacet (core/render/bsdfs/microfacet.h): sin^2 from x and y, never 1 - z^2.
 template <typename T>
 T microfacet_D(MicrofacetType type, const T& alpha, const V3<T>& m) {
   if (ad::value(m.z) <= 0.0) return T(0.0);
-  const T c2 = m.z * m.z, a2 = alpha * alpha;
+  const T c2 = m.z * m.z, s2 = m.x * m.x + m.y * m.y, a2 = alpha * alpha;
   if (type == MicrofacetType::GGX) {
-    const T t = c2 * (a2 - T(1.0)) + T(1.0);
+    const T t = s2 + c2 * a2;
     return a2 / (T(kPi) * t * t);
   }
-  const T tan2 = (T(1.0) - c2) / c2;
+  const T tan2 = s2 / c2;
   return exp(-tan2 / a2) / (T(kPi) * a2 * c2 * c2);
 }
 
 template <typename T>
 T microfacet_lambda(MicrofacetType type, const T& alpha, const V3<T>& w) {
   const T c2 = w.z * w.z;
-  const T tan2 = max(T(1.0) - c2, T(0.0)) / c2;
+  const T tan2 = (w.x * w.x + w.y * w.y) / c2;
   if (ad::value(tan2) == 0.0) return T(0.0);
   if (type == MicrofacetType::GGX) return T(0.5) * (T(-1.0) + sqrt(T(1.0) + alpha * alpha * tan2));
   const T a = T(1.0) / (alpha * sqrt(tan2));

@@ -125,6 +125,16 @@ struct SilhouetteCurve {
   float weight;   // selection weight: projected length in pixels
 };
 
+// The surfaces that meet at a point of a camera curve (a mesh edge's triangles), each with a world
+// direction into it: the primary term shades each side on its own surface instead of through a
+// probe ray beside the curve, which crosses a face seen nearly edge-on and double counts.
+struct CurveSides {
+  int count = 0;
+  SurfaceInteraction surface[2];
+  Vec3 inward[2];      // from the point into that surface
+  bool facing[2];      // the surface faces the eye (its oriented normal)
+};
+
 // The pinhole camera as the primary term sees it.
 struct CameraView {
   FilmProjection proj;
@@ -202,6 +212,8 @@ concept CameraSilhouettesKind = requires(const Scene& scene, const G& g, const C
   // The point at parameter u in [0, 1) of a curve as a function of the parameters, dP/du, and the
   // density of u.
   { CameraSilhouettes<G>::point(c, g, curve, 0.5f, view.eye, P, dP, pdf) } -> std::same_as<bool>;
+  // The surfaces meeting at the point (none: both sides are shaded by probe rays).
+  CameraSilhouettes<G>::sides(scene, g, curve, Vec3(0.0f), view.eye, std::declval<CurveSides&>());
 };
 
 template <typename G>

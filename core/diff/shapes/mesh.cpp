@@ -479,11 +479,13 @@ void CameraSilhouettes<Mesh>::append(const Scene&, const Mesh& m, int shape, con
     const MeshEdge& e = m.edges[ei];
     bool candidate = e.face_count != 2;  // boundary or non-manifold edges are always candidates
     if (!candidate) candidate = faces_eye(e.face0) != faces_eye(e.face1);  // silhouette
-    // Flat shading: the radiance also jumps across a crease between two faces that both face
-    // the camera (1e-6: cosine below which the faces count as coplanar, where the jump is zero).
-    // Creases with a back-facing face are hidden or are silhouettes already; including them
-    // would count an outline twice where a face is seen exactly edge-on.
-    if (!candidate && m.face_normals && faces_eye(e.face0) && faces_eye(e.face1))
+    // The radiance also jumps across a crease between two faces that both face the camera (1e-6:
+    // cosine below which the faces count as coplanar, where the jump is zero): with flat shading
+    // the shading normal jumps; with smooth shading the leak test's cut, the geometric horizon,
+    // does (a light just above one face's plane is below the other's: the terminator runs along
+    // edges). Creases with a back-facing face are hidden or are silhouettes already; including
+    // them would count an outline twice where a face is seen exactly edge-on.
+    if (!candidate && faces_eye(e.face0) && faces_eye(e.face1))
       candidate = glm::dot(m.oriented_normal(e.face0), m.oriented_normal(e.face1)) < 1.0 - 1e-6;
     if (!candidate) continue;
     const Vec3 a = m.vertex(e.a), b = m.vertex(e.b);
@@ -495,6 +497,29 @@ void CameraSilhouettes<Mesh>::append(const Scene&, const Mesh& m, int shape, con
     const float len = float(glm::length(sb - sa));
     if (!(len > 0.0f)) continue;
     out.push_back({shape, int(ei), len});
+  }
+}
+
+void CameraSilhouettes<Mesh>::sides(const Scene&, const Mesh& m, const SilhouetteCurve& curve, const Vec3& P, const ad::V3<double>& eye,
+                                    CurveSides& out) {
+  const MeshEdge& e = m.edges[size_t(curve.local)];
+  out.count = 0;
+  for (int f : {e.face0, e.face1}) {
+    if (f < 0 || out.count == 2) continue;
+    const Vec3 a = m.vertex(m.indices[3 * size_t(f)]), b = m.vertex(m.indices[3 * size_t(f) + 1]), cv = m.vertex(m.indices[3 * size_t(f) + 2]);
+    // Barycentrics of P in f (on its edge e, up to rounding), clamped into the triangle.
+    const Vec3d e1 = Vec3d(b - a), e2 = Vec3d(cv - a), r = Vec3d(P - a);
+    const double g11 = glm::dot(e1, e1), g12 = glm::dot(e1, e2), g22 = glm::dot(e2, e2), det = g11 * g22 - g12 * g12;
+    if (!(det > 0.0)) continue;
+    double b1 = (g22 * glm::dot(r, e1) - g12 * glm::dot(r, e2)) / det, b2 = (g11 * glm::dot(r, e2) - g12 * glm::dot(r, e1)) / det;
+    b1 = std::clamp(b1, 0.0, 1.0);
+    b2 = std::clamp(b2, 0.0, 1.0 - b1);
+    SurfaceInteraction& si = out.surface[out.count];
+    m.fill_interaction(f, float(b1), float(b2), si);
+    si.shape = curve.shape;
+    out.inward[out.count] = m.vertex(opposite_vertex(m, f, e.a, e.b)) - P;
+    out.facing[out.count] = glm::dot(m.oriented_normal(f), Vec3d(eye.x, eye.y, eye.z) - Vec3d(P)) > 0.0;
+    ++out.count;
   }
 }
 

@@ -43,6 +43,9 @@ struct CameraSilhouettes<Mesh> {
                      uint64_t& skipped);
   static bool point(const DiffContext& c, const Mesh& m, const SilhouetteCurve& curve, float u, const ad::V3<double>& eye,
                     ad::V3<ad::Var>& P, ad::V3<double>& dP, double& pdf_param);
+  // The edge's distinct triangles at P (two for a crease or silhouette, one for an open edge).
+  static void sides(const Scene& scene, const Mesh& m, const SilhouetteCurve& curve, const Vec3& P, const ad::V3<double>& eye,
+                    CurveSides& out);
 };
 
 // The mesh edges that can be silhouettes from some direction: boundary, non-manifold and convex

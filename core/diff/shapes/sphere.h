@@ -44,6 +44,10 @@ struct CameraSilhouettes<Sphere> {
                      uint64_t& skipped);
   static bool point(const DiffContext& c, const Sphere& s, const SilhouetteCurve& curve, float u, const ad::V3<double>& eye,
                     ad::V3<ad::Var>& P, ad::V3<double>& dP, double& pdf_param);
+  // None: a smooth outline's inner probe ray lands on the sphere itself.
+  static void sides(const Scene&, const Sphere&, const SilhouetteCurve&, const Vec3&, const ad::V3<double>&, CurveSides& out) {
+    out.count = 0;
+  }
 };
 
 }  // namespace limn

@@ -7,9 +7,56 @@ using namespace replay;
 using ad::Var;
 using VV = ad::V3<Var>;
 
+namespace {
+
+// Smooth shading's geometric horizon (docs/derivatives.md, "Smooth shading"). The leak test keeps
+// an outgoing direction w at x only on the geometric side of the incoming one, s = side (w . n_g) > 0,
+// a cut through the shading hemisphere where f |cos_s| L jumps from a non-zero value to 0. It moves
+// with the geometry, so the derivative gains the boundary integral over the great circle s = 0:
+//     d/dtheta int f L H(s) dw = int_{s=0} f L (ds/dtheta) dl(w),
+//     ds/dtheta = side (w . dn_g/dtheta + (dy/dtheta - dx/dtheta) . n_g / |y - x|),
+// with x and the point y it sees along w attached to their surfaces (the relative velocity of the
+// cut, as in the indirect term). One uniform w on the circle (pdf 1 / 2 pi); f L are the limits
+// from the kept side. Flat shading has f |cos_s| = 0 on the circle, and no term.
+VV horizon_term(const Scene& scene, const DiffParams& params, PathInputs& in, const DiffVertex& x, const SurfaceInteraction& si,
+                const Bsdf& bsdf, const Vec3& wi_local, bool front, const VV& beta, int budget, Pcg32 rng_copy, PathCounters& counters) {
+  // A stream of its own: the replay must consume random numbers exactly as the primal path does.
+  const uint64_t s = (uint64_t(rng_copy.next_u32()) << 32) | rng_copy.next_u32();
+  Pcg32 rng(mix_bits(s), 0x686f72697a6f6eULL);
+  const float side = front ? 1.0f : -1.0f;
+  const Frame frame(si.ng);
+  const float phi = 2.0f * kPi * rng.next_float();
+  const Vec3 w = std::cos(phi) * frame.s + std::sin(phi) * frame.t;
+  const Spectrum f = bsdf.eval(wi_local, si.frame.to_local(w), si.uv, front);
+  if (is_black(f) || !is_finite(f)) return VV();  // below the shading hemisphere too: no jump
+  // The radiance just above the cut, along a direction 1e-4 rad to the kept side (the ray must
+  // leave the surface's own plane; the limit is approached at first order in that angle).
+  const Vec3 w_kept = glm::normalize(w + side * 1e-4f * si.ng);
+  const Ray ray = spawn_ray(si, w_kept);
+  Pcg32 rng_path = rng;
+  const Spectrum L = path_radiance(scene, ray, rng_path, counters, PathLimits{budget, false});
+  if (is_black(L) || !is_finite(L)) return VV();
+  // The cut's velocity: the normal's turn, and the ends' motion relative to x's plane.
+  const DiffContext c{scene, params, in};
+  Var v = dot(constant(w), x.ng);
+  SurfaceInteraction y;
+  counters.rays++;
+  if (scene.intersect(ray, y)) {
+    const VV y_p = params.moves(y.shape) ? attached_position(c, SurfacePoint::of(y)) : constant(y.p);
+    v = v + dot(y_p - x.p, constant(si.ng)) / Var(double(glm::length(y.p - si.p)));
+  }
+  v = (v - Var(v.v)) * Var(double(side));  // its value is 0 on the circle; only the derivative counts
+  if (v.is_constant()) return VV();
+  const ad::V3<double> b = ad::values(beta);
+  const Spectrum weight = Spectrum(float(b.x), float(b.y), float(b.z)) * f * L * (2.0f * kPi);
+  return constant(weight) * v;
+}
+
+}  // namespace
+
 
 ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& params, const Ray& camera_ray, Pcg32& rng,
-                                       PathInputs& inputs, PathCounters& counters, int max_depth) {
+                                       PathInputs& inputs, PathCounters& counters, int max_depth, bool horizon) {
   const IntegratorSettings& cfg = scene.integrator;
   VV L;
   if (max_depth == 0) return L;
@@ -89,6 +136,11 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
     const Bsdf& bsdf = scene.bsdfs[shape.bsdf];
     const Vec3 wi_local = si.frame.to_local(-ray.d);
     const bool front = glm::dot(ray.d, si.ng) < 0.0f;
+
+    // Smooth shading (n_s != n_g) of reflective BSDFs: the geometric horizon's boundary term.
+    if (horizon && !bsdf.is_delta() && !bsdf.transmits() && glm::dot(si.ns, si.ng) < 1.0f - 1e-6f)
+      L = L + horizon_term(scene, params, inputs, x, si, bsdf, wi_local, front, beta, max_depth < 0 ? -1 : max_depth - depth - 1, rng,
+                           counters);
 
     // Next-event estimation: the primal sample and its tests (shared with path_radiance()).
     if (cfg.emitter_sampling && !bsdf.is_delta() && !scene.emitters.empty()) {

@@ -20,8 +20,9 @@ struct InteriorCounters {
 
 // Radiance along camera_ray as three tape variables (R, G, B); consumes random numbers exactly as
 // path_radiance() does, so its value equals the primal estimate.
-// max_depth: as IntegratorSettings::max_depth.
+// max_depth: as IntegratorSettings::max_depth. horizon: at smooth-shaded vertices, add the boundary
+// term of the leak test's cut at the geometric horizon (value 0, a derivative only; interior.cpp).
 ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& params, const Ray& camera_ray, Pcg32& rng,
-                                       PathInputs& inputs, PathCounters& counters, int max_depth);
+                                       PathInputs& inputs, PathCounters& counters, int max_depth, bool horizon = true);
 
 }  // namespace limn

@@ -60,14 +60,54 @@ bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& d
   const double pdf_length = pmf * pdf_param / ds_len;  // per unit of film length
   pixel = int(fy.v) * int(proj.W) + int(fx.v);
 
-  // Radiance on both sides with the same random numbers.
+  // The surfaces meeting at P (a mesh edge's triangles): a side of the curve that one of them
+  // covers is shaded on that surface at P, not through a probe ray beside the curve, which passes
+  // a triangle seen nearly edge-on and lands on whatever lies beyond it (the outline of a finely
+  // tessellated mesh was counted once for its silhouette and again for the crease next to it).
   PathCounters counters;
+  const Vec3 p_value(float(P.x.v), float(P.y.v), float(P.z.v));
+  CurveSides sides;
+  with_group<CameraSilhouettes>(m_scene, c.shape, "camera silhouettes",
+                                [&](auto group, const auto& g) { group.sides(m_scene, g, c, p_value, eye, sides); });
+  const Ray centre = m_scene.camera.generate_ray(Vec2(float(fx.v), float(fy.v)));
+  const SurfaceInteraction* side_surface[2] = {nullptr, nullptr};
+  int chosen[2] = {-1, -1};
+  if (sides.count > 0) {
+    // P must be what the camera sees there: an occluder in front takes both sides alike.
+    const float t_p = glm::dot(p_value - centre.o, centre.d);
+    SurfaceInteraction first;
+    counters.rays++;
+    if (m_scene.intersect(Ray{centre.o, centre.d, centre.tmin, t_p * (1.0f - 1e-4f)}, first) && first.shape != c.shape) {
+      rays += counters.rays;
+      return false;
+    }
+    for (int j = 0; j < sides.count; ++j) {
+      // The film side a surface covers: where its far corner projects (a point just inside a
+      // triangle seen nearly edge-on projects onto the curve within rounding).
+      glm::dvec2 q;
+      const Vec3 inside = p_value + sides.inward[j];
+      if (!view.film_of(ad::V3<double>(inside.x, inside.y, inside.z), q)) continue;
+      const int side = glm::dot(q - Vec2d(fx.v, fy.v), n) < 0.0 ? 0 : 1;
+      // Of two surfaces on one side (a silhouette: the other folds away behind), the one facing the eye.
+      if (chosen[side] < 0 || (sides.facing[j] && !sides.facing[chosen[side]])) chosen[side] = j;
+    }
+    for (int side = 0; side < 2; ++side)
+      if (chosen[side] >= 0) {
+        sides.surface[chosen[side]].t = t_p;
+        side_surface[side] = &sides.surface[chosen[side]];
+      }
+  }
+  // Radiance on both sides with the same random numbers.
   const Pcg32 rng_paths = rng;
   Spectrum L[2];
   for (int side = 0; side < 2; ++side) {
+    Pcg32 r = rng_paths;
+    if (side_surface[side]) {
+      L[side] = path_radiance(m_scene, centre, r, counters, PathLimits{m_max_depth, true, side_surface[side]});
+      continue;
+    }
     const double sign = side == 0 ? -1.0 : 1.0;
     const Vec2 film(float(fx.v + sign * kProbeOffset * n.x), float(fy.v + sign * kProbeOffset * n.y));
-    Pcg32 r = rng_paths;
     L[side] = path_radiance(m_scene, m_scene.camera.generate_ray(film), r, counters, PathLimits{m_max_depth, true});
   }
   rays += counters.rays;

@@ -12,21 +12,25 @@ struct Microfacet {
   float alpha = 0.1f;          // > 0; roughness as in Walter et al. 2007
   bool sample_visible = true;  // GGX: sample visible normals (Heitz 2018); Beckmann: always the full NDF
 
+  // sin^2 of a unit vector's angle to z, from its x and y: 1 - z^2 cancels in float once the angle
+  // is below ~3e-4 rad, which a lobe of alpha 1e-4 lives in.
+  static float sin2(const Vec3& v) { return v.x * v.x + v.y * v.y; }
+
   // Normal distribution D(m), per unit projected area.
   float D(const Vec3& m) const {
     if (m.z <= 0.0f) return 0.0f;
-    const float c2 = m.z * m.z, a2 = alpha * alpha;
+    const float c2 = m.z * m.z, s2 = sin2(m), a2 = alpha * alpha;
     if (type == MicrofacetType::GGX) {
-      const float t = c2 * (a2 - 1.0f) + 1.0f;
+      const float t = s2 + c2 * a2;  // c^2 (a^2 - 1) + 1, without the cancellation
       return a2 / (kPi * t * t);
     }
-    const float tan2 = (1.0f - c2) / c2;
+    const float tan2 = s2 / c2;
     return std::exp(-tan2 / a2) / (kPi * a2 * c2 * c2);
   }
   // Smith Lambda(w).
   float lambda(const Vec3& w) const {
     const float c2 = w.z * w.z;
-    const float tan2 = std::max(0.0f, 1.0f - c2) / c2;
+    const float tan2 = sin2(w) / c2;
     if (tan2 == 0.0f) return 0.0f;
     if (type == MicrofacetType::GGX) return 0.5f * (-1.0f + std::sqrt(1.0f + alpha * alpha * tan2));
     const float a = 1.0f / (alpha * std::sqrt(tan2));
@@ -67,7 +71,7 @@ struct Microfacet {
     if (type == MicrofacetType::GGX) tan2 = alpha * alpha * u.x / std::max(1.0f - u.x, 1e-7f);
     else tan2 = -alpha * alpha * std::log(std::max(1.0f - u.x, 1e-30f));  // guard log(0) at u = 1
     const float cos_t = 1.0f / std::sqrt(1.0f + tan2);
-    const float sin_t = safe_sqrt(1.0f - cos_t * cos_t);
+    const float sin_t = std::sqrt(tan2) * cos_t;  // not sqrt(1 - cos^2): that cancels for small alpha
     const float phi = 2.0f * kPi * u.y;
     return Vec3(sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t);
   }

@@ -57,7 +57,9 @@ Spectrum path_radiance(const Scene& scene, const Ray& camera_ray, Pcg32& rng, Pa
   for (int depth = 0;; ++depth) {
     SurfaceInteraction si;
     counters.rays++;
-    if (!scene.intersect(ray, si)) {
+    if (depth == 0 && limits.first_hit) {
+      si = *limits.first_hit;
+    } else if (!scene.intersect(ray, si)) {
       if (depth == 0 && hide) break;
       for (int idx : scene.infinite_emitters) {
         const Emitter& e = scene.emitters[idx];

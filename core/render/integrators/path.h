@@ -17,6 +17,8 @@ struct PathCounters {
 struct PathLimits {
   int max_depth;
   bool camera_ray;
+  // When set, the ray's first hit, chosen by the caller (a surface the ray meets at a shared edge).
+  const SurfaceInteraction* first_hit = nullptr;
 };
 
 // One next-event-estimation sample at si (an emitter chosen uniformly, a point or direction on it,
