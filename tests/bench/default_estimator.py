@@ -30,6 +30,7 @@ CASES = [
     ("glossy_reflection_reflective_emitter", "shape.vertex_positions", "x"),
     ("sphere_glossy_reflection", "shape.center", "x"),
     ("emitting_occluder_reflection", "shape.vertex_positions", "x"),
+    ("small_light_shadow", "occluder.vertex_positions", "x"),
 ]
 METHODS = ["full", "default", "projective_grid", "octree"]
 
@@ -60,7 +61,7 @@ def main() -> int:
         path = os.path.join(ROOT, "scenes", "validation", scene + ".json")
         out = os.path.join(args.out, f"{scene}__{param.replace('.', '_')}")
         cmd = [py, "-m", "limn", "bench", path, "--param", param, "--tangent", tangent, "--fd-spp", str(args.fd_spp),
-               "--eps", "0.02", "--methods", ",".join(METHODS), "--budgets", *map(str, args.budgets), "--runs", str(args.runs),
+               "--eps", "0.005", "--methods", ",".join(METHODS), "--budgets", *map(str, args.budgets), "--runs", str(args.runs),
                "--out", out]
         print(" ".join(cmd), flush=True)
         subprocess.run(cmd, check=True)
@@ -77,7 +78,7 @@ def main() -> int:
              "`default` is `render_forward` with its default options (guiding \"auto\": the projective grid below 256 "
              "boundary samples per pixel, the octree from there; its guide rebuilt in every call here); `full` samples "
              "the boundary uniformly (guiding \"none\", the default before). Errors: relative RMSE against central "
-             f"differences ({args.fd_spp} spp, eps 0.02), the root mean square over {args.runs} runs. Equal-time ratio: "
+             f"differences ({args.fd_spp} spp, eps 0.005), the root mean square over {args.runs} runs. Equal-time ratio: "
              "full's error scaled to default's time (error ~ time^-1/2) over default's error; above 1 the default wins.", "",
              "| scene | parameter | spp | time full (s) | time default (s) | RMSE full | RMSE default | equal-time ratio |",
              "|---|---|---|---|---|---|---|---|"]
