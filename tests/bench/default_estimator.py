@@ -6,8 +6,8 @@ runs `python3 -m limn bench` with the methods `full` (guiding none), `default` (
 defaults: guiding "auto"), `projective_grid` and `octree`, then writes
 <out>/README.md: per scene and budget, the error of `full` over that of `default` once both are
 scaled to the same time (error ~ time^-1/2). A ratio above 1 means the default is better. The
-set-up of the default's guide is counted in every call (rebuilt each time); optimisation loops
-keep it for guide_refresh calls, which only lowers the default's time."""
+set-up of the default's guide is counted in every call (the bench passes guide_refresh=0);
+optimisation loops keep it for guide_refresh calls, which only lowers the default's time."""
 from __future__ import annotations
 
 import argparse

@@ -81,7 +81,9 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
             for m in methods:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    img = scene.render_forward(t, spp=b, seed=seed + 1000 * r, **options[m])
+                    # guide_refresh=0: every call builds its own guide (the cache holds one guide per
+                    # scene, and interleaved methods would otherwise reuse each other's).
+                    img = scene.render_forward(t, spp=b, seed=seed + 1000 * r, **dict(options[m], guide_refresh=0))
                 st = scene.last_stats
                 samples[(m, b)].append((img.astype(np.float64), st["seconds"], guide_seconds(st["summary"])))
                 summary[m] = st["summary"]
@@ -105,7 +107,7 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
              f"Parameter `{param}`, tangent `{tangent}`; reference: central differences, eps {eps}, {fd_spp} spp "
              f"({t_ref:.1f} s, cached). Errors are relative to the reference's RMS. Film {scene.width}x{scene.height}; "
              f"budget = samples per pixel for every term computed. {runs} run(s) per row on a shared 2-core machine "
-             f"(seeds differ; for each budget and run every method in turn, so that they share the machine's drift); time includes building the guide.", "",
+             f"(seeds differ; for each budget and run every method in turn, so that they share the machine's drift); time includes building the guide (in every call: guide_refresh=0).", "",
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
              "random points per cell; `projective_grid` and `octree` filled from projected seeds (`paper_projective_grid`: "
              "one grid and no direction histogram, as in the paper; `octree_untrained`: "
