@@ -3,7 +3,7 @@
 
 For each scene of scenes/validation (its parameter and tangent from scenes/validation/README.md),
 runs `python3 -m limn bench` with the methods `full` (guiding none), `default` (the options'
-defaults: guiding "auto"), `projective_grid` and `octree`, then writes
+defaults: guiding "auto"), and `projective_grid`, then writes
 <out>/README.md: per scene and budget, the error of `full` over that of `default` once both are
 scaled to the same time (error ~ time^-1/2). A ratio above 1 means the default is better. The
 set-up of the default's guide is counted in every call (the bench passes guide_refresh=0);
@@ -32,7 +32,7 @@ CASES = [
     ("emitting_occluder_reflection", "shape.vertex_positions", "x"),
     ("small_light_shadow", "occluder.vertex_positions", "x"),
 ]
-METHODS = ["full", "default", "projective_grid", "octree"]
+METHODS = ["full", "default", "projective_grid"]
 
 
 def rows(path: str) -> dict:
@@ -76,7 +76,7 @@ def main() -> int:
              f"Regenerate: `.venv/bin/python tests/bench/default_estimator.py --budgets {' '.join(map(str, args.budgets))} "
              f"--runs {args.runs} --fd-spp {args.fd_spp}` (the per-scene bench tables are in the folders beside this file).", "",
              "`default` is `render_forward` with its default options (guiding \"auto\": the projective grid below 256 "
-             "boundary samples per pixel, the octree from there; its guide rebuilt in every call here); `full` samples "
+             "boundary samples per pixel, the octree from there with its leaves capped at the call's boundary sample count; its guide rebuilt in every call here); `full` samples "
              "the boundary uniformly (guiding \"none\", the default before). Errors: relative RMSE against central "
              f"differences ({args.fd_spp} spp, eps 0.005), the root mean square over {args.runs} runs. Equal-time ratio: "
              "full's error scaled to default's time (error ~ time^-1/2) over default's error; above 1 the default wins.", "",
