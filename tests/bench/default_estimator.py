@@ -53,6 +53,8 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--fd-spp", type=int, default=65536)
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "reports", "default_estimator"))
+    ap.add_argument("--only", nargs="+", default=None, metavar="SCENE",
+                    help="re-run these scenes only; the table still lists every scene whose bench report is in --out")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     py = sys.executable
@@ -63,8 +65,11 @@ def main() -> int:
         cmd = [py, "-m", "limn", "bench", path, "--param", param, "--tangent", tangent, "--fd-spp", str(args.fd_spp),
                "--eps", "0.005", "--methods", ",".join(METHODS), "--budgets", *map(str, args.budgets), "--runs", str(args.runs),
                "--out", out]
-        print(" ".join(cmd), flush=True)
-        subprocess.run(cmd, check=True)
+        if args.only is None or scene in args.only:
+            print(" ".join(cmd), flush=True)
+            subprocess.run(cmd, check=True)
+        if not os.path.exists(os.path.join(out, scene + ".md")):
+            continue
         r = rows(os.path.join(out, scene + ".md"))
         for b in args.budgets:
             full, default = r.get(("full", b)), r.get(("default", b))
