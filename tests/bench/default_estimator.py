@@ -31,6 +31,7 @@ CASES = [
     ("sphere_glossy_reflection", "shape.center", "x"),
     ("emitting_occluder_reflection", "shape.vertex_positions", "x"),
     ("small_light_shadow", "occluder.vertex_positions", "x"),
+    ("smooth_vessel", "vessel.vertex_positions", "x"),
 ]
 METHODS = ["full", "default", "projective_grid"]
 
