@@ -9,7 +9,7 @@ const std::map<std::string, ShapeLoader>& shape_kinds() {
   static const std::map<std::string, ShapeLoader> table = {
       {"obj", load_mesh_shape},     {"ply", load_mesh_shape},  {"mesh", load_mesh_shape},
       {"rectangle", load_mesh_shape}, {"cube", load_mesh_shape}, {"sphere", load_sphere},
-      {"heightfield", load_heightfield},
+      {"heightfield", load_heightfield}, {"disk", load_disk},
   };
   return table;
 }
@@ -49,7 +49,7 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       Props ep(ctx, *child, describe("emitter", id, ctype));
       AreaEmitter a;
       a.shape = int(ctx.scene->shapes.size());
-      a.radiance = ep.spectrum("radiance", Spectrum(1.0f));
+      a.radiance = ep.texture("radiance", Spectrum(1.0f));
       ep.check_unused();
       ctx.scene->emitters.push_back(Emitter{nested_id(p, *child, id), a});
       shape.emitter = int(ctx.scene->emitters.size() - 1);
