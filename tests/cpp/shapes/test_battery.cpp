@@ -367,7 +367,7 @@ TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree 
 }
 
 TEST_CASE_TEMPLATE("shape battery: boundary samples invert exactly and E[1/pdf] is the segments' measure", K, MeshKind, SphereKind,
-                   HeightfieldKind) {
+                   HeightfieldKind, DiskKind) {
   auto scene = K::scene();
   const DiffParams params(*scene, {K::params.front()});
   if constexpr (is_unsupported<BoundarySegments<typename K::G>>) {
