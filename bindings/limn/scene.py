@@ -158,8 +158,11 @@ class Scene:
         Options (keyword arguments; their defaults are listed at the end):
 
         - ``guiding``: ``"auto"`` (the default) takes the projective grid below 256 boundary samples
-          per pixel and the octree from there (docs/reports/default_estimator.md: at low budgets the
-          octree's set-up outweighs its lower error), and says so in the summary; ``"none"``
+          per pixel and the octree from there, its leaves capped at the call's boundary sample count
+          (docs/reports/default_estimator/README.md: at low budgets the octree's set-up outweighs its
+          lower error); no guide when every boundary segment ends at a point or directional light (no
+          bounce after the first hit, only delta emitters), which fixes its direction; the summary
+          says which; ``"none"``
           samples the boundary sample space uniformly; ``"grid"`` uses a
           uniform grid of ``grid_resolution`` cells along the first axis (and R/4 x R/2 over the
           others); ``"octree"`` an adaptive octree (``octree_slices`` slabs along the first axis,

@@ -46,7 +46,7 @@ constexpr int kDirectionOctaves = 2;
 // along each axis; docs/reports/projective/README.md.
 constexpr int kGridOctaves = 2;
 // guiding "auto": the octree from this many boundary samples per pixel, the projective grid below
-// (docs/reports/default_estimator.md): the octree's error is lower per sample, but its set-up costs
+// (docs/reports/default_estimator/README.md): the octree's error is lower per sample, but its set-up costs
 // seconds where the grid's costs a tenth of that, which decides at low budgets.
 constexpr int kAutoOctreeSpp = 256;
 // Calls a guide is kept for by default (guide_refresh), while the geometry moves less than

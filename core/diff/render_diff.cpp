@@ -106,7 +106,9 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
                                                         (opt.guiding == "octree" ? "the octree" : "the projective grid") + "): " : "") +
                          "guiding " + g->guide->describe() + ", " + g->origin + ", built in " + std::to_string(g->seconds) + " s" + g->reuse +
                          ", " + std::to_string(g->guide->memory_bytes() / 1024) + " KiB, 10% uniform defensive mixture"
-                   : std::string("guiding none (uniform)")));
+                   : std::string(opt.guiding_auto ? "guiding auto: none (uniform), as every boundary segment ends at a point or "
+                                                    "directional light, which fixes its direction"
+                                                  : "guiding none (uniform)")));
     for (const std::string& id : indirect->space().left_out())
       s.push_back("indirect boundary: static shape '" + id + "' left out: its kind has no boundary segments");
   }
