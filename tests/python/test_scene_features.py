@@ -147,6 +147,38 @@ def test_indirect_term_splats_through_the_filter():
     check_term_power(scene, name, x_translation(scene, name), 16)
 
 
+def crop_agrees_with_the_full_film(d, tangents, window, seeds=6, **options):
+    """The cropped film's image and derivative image against the same window of the whole film's:
+    block z-scores over independent seeds (the pixels' random streams differ between the two)."""
+    x0, y0, w, h = window
+    full = limn.load_dict(d)
+    cropped_d = {**d, "sensor": {**d["sensor"], "film": {**d["sensor"]["film"], "crop_offset_x": x0, "crop_offset_y": y0,
+                                                          "crop_width": w, "crop_height": h}}}
+    cropped = limn.load_dict(cropped_d)
+    for scene in (full, cropped):
+        scene.set_differentiable(list(tangents))
+    run = lambda scene, k: (scene.render(seed=k), quiet(scene.render_forward, tangents, seed=k, **options))  # noqa: E731
+    a = [run(full, k) for k in range(seeds)]
+    b = [run(cropped, 100 + k) for k in range(seeds)]
+    assert b[0][0].shape == (h, w, 3)
+    for i, what in enumerate(["image", "derivative"]):
+        z = block_z(np.stack([r[i][y0:y0 + h, x0:x0 + w] for r in a]), np.stack([r[i] for r in b]), block=2)
+        assert np.abs(z).max() < 5.0, (what, z)
+    assert np.abs(np.stack([r[1] for r in b]).mean(0)).max() > 0  # not a window of zeros
+
+
+def test_crop_window_images_and_derivatives_are_windows_of_the_full_film():
+    """Every term (interior, primary, indirect) and the heightfield estimator see the crop window
+    as the same part of the film."""
+    d = validation("occluder_point")
+    crop_agrees_with_the_full_film(d, {"box.to_world.translation": np.float32([1, 0.5, 0])}, (4, 6, 8, 8), spp=16,
+                                   spp_primary=16, spp_boundary=16)
+    heights = np.outer(np.hanning(6), np.hanning(6)).astype(np.float32)
+    hf = {"type": "scene", "sensor": camera((0, -3, 2), (0, 0, 0), width=12, height=12, spp=16),
+          "terrain": {"type": "heightfield", "data": heights}, "sun": {"type": "directional", "direction": [0.2, 0.1, -1]}}
+    crop_agrees_with_the_full_film(hf, {"terrain.heights": np.ones_like(heights)}, (2, 4, 8, 6), spp=16)
+
+
 def test_heightfield_estimator_refuses_a_non_box_filter():
     heights = np.outer(np.hanning(6), np.hanning(6)).astype(np.float32)
     d = {"type": "scene", "sensor": camera((0, -3, 2), (0, 0, 0), width=8, height=8, spp=4),
