@@ -58,10 +58,11 @@ def edge_scene(film, L=1.0):
     sensor = camera((0, -D, 0), (0, 0, 0), fov=FOV, width=EW, height=EH, spp=64)
     sensor["film"].update(film)
     return {"type": "scene", "integrator": {"type": "path", "max_depth": 1}, "sensor": sensor,
-            # 20 wide, 2 high: its top and bottom edges lie beyond the film and the filter's reach
-            # (the film sees |z| < 0.34, the filter 2 pixels = 0.33 more), and most primary-term samples land on it.
-            "lamp": {"type": "rectangle", "to_world": [{"scale": [10, 1, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 90}},
-                                                       {"translate": [edge - 10, 0, 0]}],
+            # 4 wide, 2 high: its other three edges lie beyond the film and the filter's reach (the
+            # film sees |x| < 1.34 and |z| < 0.34, the filter 2 pixels = 0.33 more), and a fifth of
+            # the primary term's samples land on the edge in view.
+            "lamp": {"type": "rectangle", "to_world": [{"scale": [2, 1, 1]}, {"rotate": {"axis": [1, 0, 0], "angle": 90}},
+                                                       {"translate": [edge - 2, 0, 0]}],
                      "emitter": {"type": "area", "radiance": L}}}
 
 
@@ -120,6 +121,9 @@ def test_primary_term_splats_through_the_filter(film, offset):
     mean, se = on.mean(0), on.std(0, ddof=1) / np.sqrt(len(on))
     z = (mean - expected) / (se + 1e-12)  # columns beyond the filter's reach: exactly 0 on both sides
     assert np.abs(z).max() < 5.0, (mean, expected, z)
+    z_k = {k: np.abs((k * mean - expected) / (k * se + 1e-12)).max() for k in (0.8, 1.25)}
+    print(f"primary term through the filter: known answer max |z| {np.abs(z).max():.2f}; scaled by k: {z_k}")
+    assert min(z_k.values()) > 5.0, z_k  # the term scaled (it is the whole derivative here) fails the known answer
     sums = on.sum(axis=1)
     assert abs(sums.mean() - expected.sum()) < 5.0 * sums.std(ddof=1) / np.sqrt(len(sums)), (sums, expected.sum())
     # FD: block z-scores (rows averaged) against central differences of the filtered image.
@@ -448,6 +452,10 @@ def test_disk_silhouette_against_finite_differences(tmp_path):
     print(f"disk silhouette: max |z| {np.abs(z_on).max():.2f} with the primary term, {np.abs(z_off).max():.2f} without")
     assert np.abs(z_on).max() < 4.5, z_on
     assert np.abs(z_off).max() > 10, z_off
+    for k in (0.8, 1.25):  # the primary term scaled (the same seeds)
+        z_k = np.abs(block_z(off + k * (on - off), fd)).max()
+        print(f"disk silhouette: primary term x{k}: max |z| {z_k:.2f}")
+        assert z_k > 5.0, (k, z_k)
 
 
 def disk_occluder(light):
