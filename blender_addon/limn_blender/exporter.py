@@ -1,7 +1,7 @@
 """Blender scene -> limn scene description (a dict in the JSON format, with numpy arrays).
 
 Exports mesh-like objects with modifiers applied (world-space vertices, split by material), the
-active camera, point / sun / area lights, the world colour, and Principled BSDF (plus a few simple
+active camera, point / spot / sun / area lights, the world colour, and Principled BSDF (plus a few simple
 BSDF nodes) mapped to the closest limn BSDF. Objects marked as limn heightfields (the object
 property ``limn_heightfield``, or named in ``export_scene(heightfields=...)``) become limn
 ``heightfield`` shapes instead (see heightfield.py). Everything that cannot be represented is listed
@@ -234,6 +234,25 @@ def _export_light(obj, world, desc, warnings, used_ids):
                      "intensity": list(colour * light.energy / (4.0 * math.pi))}
         if getattr(light, "shadow_soft_size", 0.0) > 0.0:
             warnings.append(f"light '{obj.name}': radius {light.shadow_soft_size:g} ignored (limn point lights are points)")
+    elif light.type == "SPOT":
+        # limn's (Mitsuba's) spot: intensity P / (4 pi) on its axis as a point light of power P
+        # (Cycles' convention), cutoff_angle = half of Blender's spot_size, and a linear ramp in angle
+        # over the outer spot_blend of it (Cycles blends with a smoothstep in cos; approximated).
+        d = -world[:3, 2]
+        d = d / np.linalg.norm(d)
+        helper = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        x = np.cross(helper, d)
+        x /= np.linalg.norm(x)
+        frame = np.eye(4)
+        frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = x, np.cross(d, x), d, world[:3, 3]
+        cutoff = math.degrees(light.spot_size) / 2.0
+        desc[sid] = {"type": "spot", "to_world": _rows(frame), "intensity": list(colour * light.energy / (4.0 * math.pi)),
+                     "cutoff_angle": cutoff, "beam_width": cutoff * (1.0 - light.spot_blend)}
+        if getattr(light, "shadow_soft_size", 0.0) > 0.0:
+            warnings.append(f"light '{obj.name}': radius {light.shadow_soft_size:g} ignored (limn spot lights are points)")
+        if light.spot_blend > 0.0:
+            warnings.append(f"light '{obj.name}': spot blend {light.spot_blend:g} exported as a linear falloff in angle "
+                            "(Cycles blends smoothly in cos)")
     elif light.type == "SUN":
         d = -world[:3, 2]
         desc[sid] = {"type": "directional", "direction": list(d / np.linalg.norm(d)), "irradiance": list(colour * light.energy)}

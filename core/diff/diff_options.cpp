@@ -68,6 +68,14 @@ void validate_diff_options(const Scene& scene, const DiffParams& params, const D
           opt.heightfield.interval_uniform_share);
   require(in(opt.heightfield.theta_subrange_degrees, 0.0, 180.0) && opt.heightfield.theta_subrange_degrees < 180.0f, scene,
           "theta_subrange", "in [0, 180) degrees", opt.heightfield.theta_subrange_degrees);
+  // Scene features whose discontinuities no term samples.
+  if (params.any_geometry())
+    for (const Emitter& e : scene.emitters)
+      if (const auto* pt = std::get_if<PointEmitter>(&e.model); pt && pt->hard_edge())
+        throw std::invalid_argument(scene.source + ": spot '" + e.id + "' has a hard edge (beam_width = cutoff_angle = " +
+                                    std::to_string(pt->cutoff * 180.0f / kPi) +
+                                    " degrees), a discontinuity of its lighting that no boundary term samples; give it a soft "
+                                    "edge (beam_width < cutoff_angle) to differentiate geometry");
 }
 
 // Every boundary segment the indirect term can sample ends at a point or directional light,

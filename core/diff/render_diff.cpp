@@ -164,7 +164,7 @@ ad::V3<ad::Var> replay_camera_path(const Scene& scene, const DiffParams& params,
                                    PathCounters& counters, int max_depth, bool horizon) {
   ad::Tape::current().clear();
   in.clear();
-  const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();
+  const Vec2 film = scene.camera.sample_film(x, y, rng.next_2d());
   return interior_path_radiance(scene, params, scene.camera.generate_ray(film), rng, in, counters, max_depth, horizon);
 }
 
@@ -210,14 +210,16 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
     const uint64_t n = samples_for(scene, opt.spp_primary);
     if (!terms.primary->empty())
       for_each_boundary_sample(n, kPrimaryTag, opt, [&](uint64_t, Pcg32& rng, PathInputs& in) {
-        int pixel;
+        glm::dvec2 film;
         Spectrum dL;
         ad::Var vn;
         uint64_t r = 0;
-        const bool ok = terms.primary->sample(rng, in, pixel, dL, vn, r);
+        const bool ok = terms.primary->sample(rng, in, film, dL, vn, r);
         rays += r;
         if (!ok || vn.is_constant()) return;
-        visit(in, std::vector<IndirectBoundary::Splat>{{pixel, dL / float(n), 0}}, std::vector<ad::Var>{vn});
+        std::vector<IndirectBoundary::Splat> splats;
+        scene.camera.splat(film.x, film.y, [&](int pixel, float w) { splats.push_back({pixel, dL * w / float(n), 0}); });
+        if (!splats.empty()) visit(in, splats, std::vector<ad::Var>{vn});
       });
   }
   if (opt.spp_boundary > 0) {

@@ -50,7 +50,12 @@ void Scene::collect_parameters() {
     };
     std::visit([&](auto& m) {
       using T = std::decay_t<decltype(m)>;
-      if constexpr (std::is_same_v<T, AreaEmitter> || std::is_same_v<T, ConstantEmitter>) add("radiance", m.radiance);
+      if constexpr (std::is_same_v<T, AreaEmitter>) {
+        if (Bitmap* bm = m.radiance.bitmap.get())
+          m_params.push_back({e.id + ".radiance", Parameter::Kind::EmitterValue, int(i), bm->rgb.data(), {size_t(bm->height), size_t(bm->width), 3}});
+        else
+          add("radiance", m.radiance.value);
+      } else if constexpr (std::is_same_v<T, ConstantEmitter>) add("radiance", m.radiance);
       else if constexpr (std::is_same_v<T, PointEmitter>) add("intensity", m.intensity);
       else if constexpr (std::is_same_v<T, DirectionalEmitter>) add("irradiance", m.irradiance);
     }, e.model);
@@ -66,7 +71,7 @@ const Parameter* Scene::find_parameter(const std::string& name) const {
 void Scene::validate_parameter(const Parameter& p) const {
   const std::string where = source + ": parameter '" + p.name + "'";
   const size_t n = p.size();
-  if (p.geometric && p.kind != Parameter::Kind::Translation) {  // the shape's own parameters
+  if ((p.geometric && p.kind != Parameter::Kind::Translation) || p.kind == Parameter::Kind::VertexNormals) {  // the shape's own parameters
     shapes[p.index].visit([&](const auto& g) { g.validate_parameter(p, where); });
     return;
   }
@@ -106,7 +111,11 @@ void Scene::validate_translation(size_t i) const {
 
 void Scene::apply_parameter(const Parameter& p) {
   // Translation is applied in update(), which knows the previous value; materials and emitters
-  // are read directly by the renderer and have nothing derived.
+  // are read directly by the renderer and have nothing derived. Shading normals move no surface.
+  if (p.kind == Parameter::Kind::VertexNormals) {
+    shapes[p.index].visit([&](auto& g) { g.apply_parameter(p); });
+    return;
+  }
   if (!p.geometric || p.kind == Parameter::Kind::Translation) return;
   shapes[p.index].visit([&](auto& g) { g.apply_parameter(p); });
   m_accel->shape_changed(p.index);
@@ -150,6 +159,10 @@ std::vector<std::string> Scene::update() {
     }
     apply_parameter(m_params[i]);
     std::memcpy(m_snapshots[i].data(), m_params[i].data, m_snapshots[i].size() * sizeof(float));
+    if (m_params[i].geometric)  // derived views of the moved shape (recomputed smooth normals) are not user edits
+      for (size_t j = 0; j < m_params.size(); ++j)
+        if (m_params[j].kind == Parameter::Kind::VertexNormals && m_params[j].index == m_params[i].index)
+          std::memcpy(m_snapshots[j].data(), m_params[j].data, m_snapshots[j].size() * sizeof(float));
     geometry |= m_params[i].geometric;
     names.push_back(m_params[i].name);
   }

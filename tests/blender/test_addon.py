@@ -135,10 +135,29 @@ def test_clear_errors(addon):
         bpy.ops.limn.render()
 
 
+def test_spot_lights_are_exported_as_limn_spots(addon, limn):
+    bpy.ops.object.light_add(type="SPOT", location=(0.5, 0, 3))  # points along its local -Z: down
+    spot = bpy.context.object
+    spot.name = "spot"
+    spot.data.energy, spot.data.spot_size, spot.data.spot_blend = 100.0, math.radians(60), 0.2
+    spot.data.shadow_soft_size = 0.0
+    desc, warnings = addon.export_scene(spp=4)
+    s = desc["spot"]
+    assert s["type"] == "spot"
+    assert s["cutoff_angle"] == pytest.approx(30.0) and s["beam_width"] == pytest.approx(24.0)
+    assert s["intensity"][0] == pytest.approx(100.0 / (4 * math.pi))
+    m = np.array(s["to_world"])
+    np.testing.assert_allclose(m[:3, 2], [0, 0, -1], atol=1e-6)   # limn's spot looks along its +z
+    np.testing.assert_allclose(m[:3, 3], [0.5, 0, 3], atol=1e-6)
+    assert any("spot blend" in w for w in warnings)                # the approximation is reported
+    limn.load_dict(desc).render(spp=1)
+
+
 def test_unsupported_things_are_reported(addon):
-    bpy.ops.object.light_add(type="SPOT", location=(0, 0, 3))
+    bpy.ops.object.light_add(type="AREA", location=(0, 0, 3))
+    bpy.context.object.data.shape = "DISK"
     _, warnings = addon.export_scene()
-    assert any("spot lights are not supported" in w for w in warnings)
+    assert any("disk area light exported as a rectangle" in w for w in warnings)
 
 
 def test_loader_explains_what_is_wrong(addon, tmp_path):

@@ -262,7 +262,7 @@ def test_api_errors():
         scene.render_forward({"floor.reflectance": np.ones(4)})
     with pytest.raises(ValueError, match="spp_boundary must be >= 0"):
         scene.render_forward({"floor.reflectance": np.ones(3)}, spp_boundary=-1)
-    with pytest.raises(ValueError, match="guiding must be 'none', 'grid' or 'octree'"):
+    with pytest.raises(ValueError, match="guiding must be 'auto', 'none', 'grid' or 'octree'"):
         scene.render_forward({"floor.reflectance": np.ones(3)}, guiding="kdtree")
     with pytest.raises(ValueError, match="boundary_sampler must be 'independent' or 'stratified' \\(got 'sobol'\\)"):
         scene.render_forward({"floor.reflectance": np.ones(3)}, boundary_sampler="sobol")

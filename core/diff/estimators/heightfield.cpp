@@ -58,6 +58,9 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
       if (!mesh)
         throw std::invalid_argument(where + "emitter '" + e.id + "' is attached to " + s.type + " '" + s.id +
                                     "'; only mesh area emitters are supported");
+      if (a->radiance.bitmap)
+        throw std::invalid_argument(where + "emitter '" + e.id + "' has a bitmap radiance; with a heightfield only constant "
+                                    "radiance is supported");
       EmitterTriangles t{int(i), a->shape, {}};
       for (size_t f = 0; f < mesh->triangle_count(); ++f) t.prims.push_back(int(f));
       m_area_emitters.push_back(std::move(t));
@@ -353,7 +356,7 @@ struct HeightfieldPath {
       return VV();
     }
     if (!(glm::dot(e.ng, w0) < 0.0f)) return VV();  // the back of the emitter
-    const Spectrum& rad = std::get<AreaEmitter>(scene.emitters[et.emitter].model).radiance;
+    const Spectrum& rad = std::get<AreaEmitter>(scene.emitters[et.emitter].model).radiance.value;  // constant (checked above)
     return R.bsdf_eval(bsdf, x, wi, w) * R.emitter_value(et.emitter, rad) * (sin(theta) * w_phi * w_theta * Var(double(K)));
   }
 
@@ -368,7 +371,8 @@ struct HeightfieldPath {
         if (scene.occluded(spawn_ray_to(si, pt->position))) continue;
         const VV dvec = constant(pt->position) - x.p;
         const Var d2 = dot(dvec, dvec);
-        L = L + R.bsdf_eval(bsdf, x, wi, dvec / sqrt(d2)) * R.emitter_value(idx, pt->intensity) / d2;
+        const VV w_dir = dvec / sqrt(d2);
+        L = L + R.bsdf_eval(bsdf, x, wi, w_dir) * R.emitter_value(idx, pt->intensity) / d2 * R.point_falloff(*pt, w_dir);
       } else if (const auto* dir = std::get_if<DirectionalEmitter>(&e.model)) {
         if (scene.occluded(spawn_ray(si, -dir->direction))) continue;
         L = L + R.bsdf_eval(bsdf, x, wi, constant(-dir->direction)) * R.emitter_value(idx, dir->irradiance);
@@ -496,7 +500,7 @@ struct HeightfieldPath {
     const Vec3 fwd = glm::normalize(cam.world_from_camera.vector(Vec3(0, 0, 1)));
     const Var cos_a = dot(w, constant(fwd));
     if (!(cos_a.v > 0.0)) return VV();
-    const double Kx = 0.5 * cam.width / cam.tan_half_x, Ky = 0.5 * cam.height / cam.tan_half_y;
+    const double Kx = 0.5 * cam.film_width() / cam.tan_half_x, Ky = 0.5 * cam.film_height() / cam.tan_half_y;
     VV beta = VV(Var(1.0), Var(1.0), Var(1.0)) *
               (Var(Kx * Ky) / (cos_a * cos_a * cos_a) * sin(theta) * weight);
     const Ray ray{eye, w0, cam.near_clip / float(cos_a.v), cam.far_clip / float(cos_a.v)};
@@ -509,7 +513,7 @@ struct HeightfieldPath {
     VV L;
     const Shape& shape = scene.shapes[si.shape];
     if (shape.emitter >= 0 && glm::dot(si.ng, w0) < 0.0f && !cfg.hide_emitters)
-      L = beta * R.emitter_value(shape.emitter, std::get<AreaEmitter>(scene.emitters[shape.emitter].model).radiance);
+      L = beta * R.emitter_value(shape.emitter, std::get<AreaEmitter>(scene.emitters[shape.emitter].model).radiance.value);
     return L + continue_path(x, si, -w, beta, 0);
   }
 };
@@ -526,6 +530,9 @@ std::unique_ptr<HeightfieldEstimator> heightfield_estimator(const Scene& scene, 
     if (!std::holds_alternative<Heightfield>(s.geometry)) continue;
     if (spp == 0)  // Tong et al. 2023: its boundary terms ride on the interior paths
       throw std::invalid_argument(scene.source + ": heightfield '" + s.id + "' needs spp_interior >= 1 (its estimator has no separate boundary term)");
+    if (scene.camera.filter.type != FilmFilter::Type::Box)  // pixel(): each pixel's box footprint (App. A.1)
+      throw std::invalid_argument(scene.source + ": heightfield '" + s.id + "': its estimator integrates each pixel's box "
+                                  "footprint; use the box reconstruction filter to differentiate it");
     return std::make_unique<HeightfieldEstimator>(scene, params, options, max_depth);
   }
   return nullptr;

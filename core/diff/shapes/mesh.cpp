@@ -22,9 +22,22 @@ void triangle(const DiffContext& c, const Mesh& m, int shape, int prim, VV& v0, 
 // The point at barycentrics (b1, b2).
 VV interpolate(const VV& v0, const VV& v1, const VV& v2, const Var& b1, const Var& b2) { return v0 * (Var(1.0) - b1 - b2) + v1 * b1 + v2 * b2; }
 
-// Area-weighted vertex normal from the triangles around vertex i, each with its
-// Mesh::normal_sign (exactly as Mesh::update_derived).
+VV derived_vertex_normal(const DiffContext& c, const Mesh& m, int shape, uint32_t i);
+
+// The shading normal of vertex i. "<id>.vertex_normals", when differentiable, enters as an offset of value 0 on top: the normal
+// written through it is used as given (Mesh::explicit_normals), independent of the positions.
 VV vertex_normal(const DiffContext& c, const Mesh& m, int shape, uint32_t i) {
+  const long slot = c.params.slot(Parameter::Kind::VertexNormals, shape);
+  VV n = derived_vertex_normal(c, m, shape, i);
+  if (slot < 0) return n;
+  const long s = slot + 3 * long(i);
+  return n + VV(c.in.make(0.0, s), c.in.make(0.0, s + 1), c.in.make(0.0, s + 2));
+}
+
+// Area-weighted vertex normal from the triangles around vertex i, each with its
+// Mesh::normal_sign (exactly as Mesh::update_derived); a written normal as given.
+VV derived_vertex_normal(const DiffContext& c, const Mesh& m, int shape, uint32_t i) {
+  if (m.explicit_normals) return constant(m.vertex_normals[i]);
   if (c.params.slot(Parameter::Kind::VertexPositions, shape) < 0) return constant(m.vertex_normals[i]);  // a translation keeps normals
   VV sum;
   for (uint32_t k = m.vertex_face_offsets[i]; k < m.vertex_face_offsets[i + 1]; ++k) {

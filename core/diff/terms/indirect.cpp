@@ -18,17 +18,16 @@ using VV = ad::V3<Var>;
 constexpr int kImportanceBounces = 4;
 
 // f * W_conn of the camera connection at observing vertex si, for light arriving from direction
-// w_light (unit, pointing away from si): adds the pixel and value, returns false if none.
+// w_light (unit, pointing away from si): its film position and value, false if none.
 bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const SurfaceInteraction& si, const Vec3& w_light,
-                       int& pixel, Spectrum& value, uint64_t& rays) {
+                       glm::dvec2& film, Spectrum& value, uint64_t& rays) {
   const Vec3 eye = scene.camera.world_from_camera.point(Vec3(0.0f));
   Vec3 wc = eye - si.p;
   const float dist = glm::length(wc);
   if (!(dist > 0.0f)) return false;
   wc /= dist;
   double area_to_film;
-  pixel = proj.pixel(si.p, glm::dot(si.ng, wc), area_to_film);
-  if (pixel < 0) return false;
+  if (!proj.film_position(si.p, glm::dot(si.ng, wc), film, area_to_film) || !scene.camera.film_covers(film.x, film.y)) return false;
   const Vec3 wi = si.frame.to_local(wc), wo = si.frame.to_local(w_light);
   // Shading-normal leaks on the light side only, as in the path tracer (the viewer side is decided
   // by the geometric normal, `front`).
@@ -107,7 +106,7 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
   const float dist_y = y.t;
 
   struct Connection {
-    int pixel;
+    glm::dvec2 film;  // where it lands on the film (spread over pixels by the filter)
     Spectrum value;
     int depth;  // segments from the camera to the observing vertex that sees the edge region
   };
@@ -121,10 +120,10 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
     // Bounded paths: camera -> ... -> observer (j segments) + probe segment + 1 more at least.
     const int bounces = max_depth < 0 ? kImportanceBounces : max_depth - 2;
     for (int j = 1;; ++j) {
-      int pixel;
+      glm::dvec2 film;
       Spectrum v;
-      if (connect_to_camera(m_scene, FilmProjection(m_scene.camera), cur, w_light, pixel, v, rays))
-        conns.push_back({pixel, throughput * v, j});
+      if (connect_to_camera(m_scene, FilmProjection(m_scene.camera), cur, w_light, film, v, rays))
+        conns.push_back({film, throughput * v, j});
       if (j > bounces) break;
       // Continue the importance path by BSDF sampling (adjoint of reflection; reciprocal BSDFs).
       const Bsdf& bsdf = m_scene.bsdfs[m_scene.shapes[cur.shape].bsdf];
@@ -168,7 +167,7 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
         const Vec3 d = pl->position - probe;
         const float dist = glm::length(d);
         shadow = Ray{probe, d / dist, 0.0f, dist * (1.0f - 1e-4f)};
-        value = pl->intensity / (dist * dist);
+        value = pl->intensity_towards(probe) / (dist * dist);
       } else {
         shadow = Ray{probe, -w, 0.0f, kInfinity};
         value = std::get<DirectionalEmitter>(em.model).irradiance;
@@ -232,7 +231,7 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
     const Spectrum dL = radiance_difference(budget);
     if (is_black(dL)) continue;
     const Spectrum value = dL * c.value * (p.jacobian / p.pdf);
-    if (is_finite(value)) splats.push_back({c.pixel, value, vi});
+    if (is_finite(value)) m_scene.camera.splat(c.film.x, c.film.y, [&](int pixel, float wf) { splats.push_back({pixel, value * wf, vi}); });
   }
 }
 

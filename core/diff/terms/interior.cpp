@@ -127,8 +127,8 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
                                 scene.emitter_selection_pdf();
         w = mis_power(prev_pdf, pdf_light);
       }
-      const Spectrum& rad = std::get<AreaEmitter>(scene.emitters[shape.emitter].model).radiance;
-      L = L + beta * R.emitter_value(shape.emitter, rad) * Var(w);
+      const Texture& rad = std::get<AreaEmitter>(scene.emitters[shape.emitter].model).radiance;
+      L = L + beta * R.emitter_radiance(shape.emitter, rad, x.u, x.v) * Var(w);
     }
 
     if (max_depth >= 0 && depth + 2 > max_depth) break;
@@ -160,12 +160,13 @@ ad::V3<ad::Var> interior_path_radiance(const Scene& scene, const DiffParams& par
           const Var cos_y = -dot(y.ng, w_dir);
           const Var g = cos_y / d2 * y.jacobian;
           const double g0 = cos_y.v / d2.v;
-          contrib = R.bsdf_eval(shape.bsdf, x, wi, w_dir) * R.emitter_value(int(k), area->radiance) * (g / Var(double(pdf_light) * g0));
+          contrib = R.bsdf_eval(shape.bsdf, x, wi, w_dir) * R.emitter_radiance(int(k), area->radiance, y.u, y.v) * (g / Var(double(pdf_light) * g0));
         } else if (const auto* pt = std::get_if<PointEmitter>(&e.model)) {
           const VV dvec = constant(pt->position) - x.p;
           const Var d2 = dot(dvec, dvec);
-          contrib = R.bsdf_eval(shape.bsdf, x, wi, with_primal_value(dvec / sqrt(d2), es.wi)) * R.emitter_value(int(k), pt->intensity) /
-                    (d2 * Var(scene.emitter_selection_pdf()));
+          const VV w_dir = with_primal_value(dvec / sqrt(d2), es.wi);
+          contrib = R.bsdf_eval(shape.bsdf, x, wi, w_dir) * R.emitter_value(int(k), pt->intensity) / (d2 * Var(scene.emitter_selection_pdf()));
+          if (pt->spot) contrib = contrib * R.point_falloff(*pt, w_dir);
         } else if (const auto* dir = std::get_if<DirectionalEmitter>(&e.model)) {
           contrib = R.bsdf_eval(shape.bsdf, x, wi, constant(-dir->direction)) * R.emitter_value(int(k), dir->irradiance) /
                     Var(scene.emitter_selection_pdf());

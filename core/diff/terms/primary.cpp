@@ -29,7 +29,7 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, i
   if (!weights.empty()) m_select = Distribution1D(weights);
 }
 
-bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& delta_L, Var& normal_velocity,
+bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, glm::dvec2& film_position, Spectrum& delta_L, Var& normal_velocity,
                              uint64_t& rays) const {
   const CameraView view(m_scene.camera);
   const FilmProjection& proj = view.proj;
@@ -52,13 +52,13 @@ bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, int& pixel, Spectrum& d
   if (pc.z.v <= proj.near) return false;
   Var fx, fy;
   proj.film(pc, fx, fy);
-  if (!(fx.v >= 0 && fx.v < proj.W && fy.v >= 0 && fy.v < proj.H)) return false;
+  if (!m_scene.camera.film_covers(fx.v, fy.v)) return false;  // reaches no pixel through the filter
   const Vec2d ds = proj.film_derivative(ad::values(pc), dP);
   const double ds_len = glm::length(ds);
   if (!(ds_len > 0.0)) return false;
   const Vec2d n(-ds.y / ds_len, ds.x / ds_len);
   const double pdf_length = pmf * pdf_param / ds_len;  // per unit of film length
-  pixel = int(fy.v) * int(proj.W) + int(fx.v);
+  film_position = Vec2d(fx.v, fy.v);
 
   // The surfaces meeting at P (a mesh edge's triangles): a side of the curve that one of them
   // covers is shaded on that surface at P, not through a probe ray beside the curve, which passes

@@ -27,10 +27,10 @@ class PrimaryBoundary {
   size_t curve_count() const { return m_curves.size(); }
   uint64_t skipped_edges() const { return m_skipped; }  // candidate edges behind the near plane
 
-  // One sample. Returns false when it lands outside the film. Otherwise `pixel` is the pixel it
-  // falls in, `delta_L` = L(s - delta n) - L(s + delta n) divided by the sample's film-length pdf,
+  // One sample. Returns false when it reaches no pixel. Otherwise `film_position` is where it
+  // falls on the film (Camera::splat spreads it over the pixels by the filter), `delta_L` = L(s - delta n) - L(s + delta n) divided by the sample's film-length pdf,
   // and the tape holds `normal_velocity` = ds/dtheta . n as a function of the shape parameters.
-  bool sample(Pcg32& rng, PathInputs& inputs, int& pixel, Spectrum& delta_L, ad::Var& normal_velocity,
+  bool sample(Pcg32& rng, PathInputs& inputs, glm::dvec2& film_position, Spectrum& delta_L, ad::Var& normal_velocity,
               uint64_t& rays) const;
 
  private:

@@ -39,7 +39,14 @@ struct Replay {
 
   // ---- materials and emitters ---------------------------------------------------------------------
   VV reflectance(int bsdf, const Texture& tex, const Var& u, const Var& v) const {
-    const long slot = params.slot(Parameter::Kind::Reflectance, bsdf);
+    return texture(tex, params.slot(Parameter::Kind::Reflectance, bsdf), u, v);
+  }
+  // An area emitter's radiance at texture coordinates (u, v).
+  VV emitter_radiance(int emitter, const Texture& tex, const Var& u, const Var& v) const {
+    return texture(tex, params.slot(Parameter::Kind::EmitterValue, emitter), u, v);
+  }
+  // A texture's value at (u, v) with its constant or texels tied to the slots from `slot` on.
+  VV texture(const Texture& tex, long slot, const Var& u, const Var& v) const {
     if (!tex.bitmap) {
       const Spectrum& c = tex.value;
       return VV(in.make(c.x, slot), in.make(c.y, slot < 0 ? -1 : slot + 1), in.make(c.z, slot < 0 ? -1 : slot + 2));
@@ -66,6 +73,11 @@ struct Replay {
   VV emitter_value(int emitter, const Spectrum& value) const {
     const long slot = params.slot(Parameter::Kind::EmitterValue, emitter);
     return VV(in.make(value.x, slot), in.make(value.y, slot < 0 ? -1 : slot + 1), in.make(value.z, slot < 0 ? -1 : slot + 2));
+  }
+  // A point light's falloff (a spot's profile; 1 for isotropic lights) along the unit direction
+  // from the receiver to the light, on the tape through the receiver's position.
+  Var point_falloff(const PointEmitter& pt, const VV& to_light) const {
+    return pt.spot ? pt.falloff(-dot(constant(pt.axis), to_light)) : Var(1.0);
   }
   Var alpha(int bsdf, float value) const { return in.make(value, params.slot(Parameter::Kind::Alpha, bsdf)); }
 

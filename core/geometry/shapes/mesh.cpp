@@ -57,7 +57,8 @@ void Mesh::update_derived() {
     orient();
   }
   triangle_areas.assign(nt, 0.0f);
-  vertex_normals.assign(face_normals ? 0 : vertex_count(), Vec3(0.0f));
+  const bool normals = !face_normals && !explicit_normals;
+  if (!explicit_normals) vertex_normals.assign(face_normals ? 0 : vertex_count(), Vec3(0.0f));
   double total = 0.0;
   for (size_t f = 0; f < nt; ++f) {
     const uint32_t i0 = indices[3 * f], i1 = indices[3 * f + 1], i2 = indices[3 * f + 2];
@@ -66,13 +67,14 @@ void Mesh::update_derived() {
     triangle_areas[f] = std::isfinite(area) ? area : 0.0f;
     total += triangle_areas[f];
     // Area-weighted normals: the unnormalised cross product is 2 * area * n.
-    if (!face_normals && std::isfinite(area) && normal_sign(f) != 0)
+    if (normals && std::isfinite(area) && normal_sign(f) != 0)
       for (uint32_t i : {i0, i1, i2}) vertex_normals[i] += float(normal_sign(f)) * c;
   }
-  for (auto& n : vertex_normals) {
-    const float len = glm::length(n);
-    n = len > 0.0f ? n / len : Vec3(0.0f);
-  }
+  if (normals)
+    for (auto& n : vertex_normals) {
+      const float len = glm::length(n);
+      n = len > 0.0f ? n / len : Vec3(0.0f);
+    }
   total_area = float(total);
   area_distribution = nt > 0 ? Distribution1D(triangle_areas) : Distribution1D();
 }
@@ -207,10 +209,21 @@ void Mesh::update_embree_geometry(RTCGeometry g) const {
 }
 
 void Mesh::list_parameters(const std::string& id, int index, std::vector<Parameter>& out) {
+  if (!face_normals && vertex_count() > 0)
+    out.push_back({id + ".vertex_normals", Parameter::Kind::VertexNormals, index, &vertex_normals[0].x, {vertex_count(), 3}, false});
   out.push_back({id + ".vertex_positions", Parameter::Kind::VertexPositions, index, positions.data(), {vertex_count(), 3}, true});
 }
 
 void Mesh::validate_parameter(const Parameter& p, const std::string& where) const {
+  if (p.kind == Parameter::Kind::VertexNormals) {
+    for (size_t i = 0; i < p.size(); i += 3) {
+      const Vec3 n(p.data[i], p.data[i + 1], p.data[i + 2]);
+      if (!is_finite(n) || !(glm::length(n) > 0.0f))
+        throw std::invalid_argument(where + ": normal " + std::to_string(i / 3) + " must be finite and non-zero (got " +
+                                    format_values(p.data + i, 3) + ")");
+    }
+    return;
+  }
   for (size_t i = 0; i < p.size(); i += 3) {
     if (!std::isfinite(p.data[i]) || !std::isfinite(p.data[i + 1]) || !std::isfinite(p.data[i + 2]))
       throw std::invalid_argument(where + ": vertex " + std::to_string(i / 3) + " is not finite (" + format_values(p.data + i, 3) + ")");

@@ -36,6 +36,9 @@ struct Mesh {
   std::vector<uint32_t> indices;     // 3 per triangle
   std::vector<float> corner_uvs;     // 6 floats per triangle (may be empty)
   bool face_normals = false;         // true: flat shading; false: area-weighted vertex normals
+  // Smooth shading with normals written through "<id>.vertex_normals": kept as given (interpolated,
+  // then normalised), no longer recomputed from the positions.
+  bool explicit_normals = false;
 
   // Derived state, recomputed by update_derived() after positions change.
   std::vector<Vec3> vertex_normals;
@@ -101,10 +104,14 @@ struct Mesh {
   }
   float area() const { return total_area; }
   PositionSample sample_position(const Vec2& u, float u_tri) const;
-  // "<id>.vertex_positions" (N x 3, world space).
+  // "<id>.vertex_normals" (N x 3, smooth shading only; listed first, so that normals written with
+  // new positions in one update are kept) and "<id>.vertex_positions" (N x 3, world space).
   void list_parameters(const std::string& id, int index, std::vector<Parameter>& out);
   void validate_parameter(const Parameter& p, const std::string& where) const;
-  void apply_parameter(const Parameter& p) { update_derived(); }
+  void apply_parameter(const Parameter& p) {
+    if (p.kind == Parameter::Kind::VertexNormals) explicit_normals = true;
+    else update_derived();
+  }
   void translate(const Vec3& delta);
   // World-space bounding box (empty: lo > hi).
   void bounds(Vec3& lo, Vec3& hi) const;

@@ -14,6 +14,24 @@ void load_emitter(Context& ctx, const json& j, const std::string& id) {
     pe.position = p.has("position") ? p.vec3("position", Vec3(0.0f)) : p.transform("to_world").point(Vec3(0.0f));
     pe.intensity = p.spectrum("intensity", Spectrum(1.0f));
     e.model = pe;
+  } else if (type == "spot") {
+    // Mitsuba's spot: at to_world's origin, pointing along its +z, angles in degrees.
+    PointEmitter pe;
+    const Transform t = p.transform("to_world");
+    float unused_scale;
+    check_similarity(p, t, unused_scale);
+    pe.position = t.point(Vec3(0.0f));
+    pe.axis = glm::normalize(t.vector(Vec3(0, 0, 1)));
+    pe.intensity = p.spectrum("intensity", Spectrum(1.0f));
+    pe.spot = true;
+    const float cutoff = p.number("cutoff_angle", 20.0f);
+    const float beam = p.number("beam_width", 0.75f * cutoff);
+    if (!(cutoff > 0.0f && cutoff < 180.0f)) p.fail("cutoff_angle must be in (0, 180) degrees (got " + std::to_string(cutoff) + ")");
+    if (!(beam >= 0.0f && beam <= cutoff))
+      p.fail("beam_width must be in [0, cutoff_angle = " + std::to_string(cutoff) + "] degrees (got " + std::to_string(beam) + ")");
+    pe.cutoff = cutoff * kPi / 180.0f;
+    pe.beam_width = beam * kPi / 180.0f;
+    e.model = pe;
   } else if (type == "directional") {
     DirectionalEmitter de;
     const Vec3 d = p.has("direction") ? p.vec3("direction", Vec3(0, 0, 1)) : p.transform("to_world").vector(Vec3(0, 0, 1));

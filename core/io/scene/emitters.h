@@ -1,4 +1,4 @@
-// Emitters at the top level of a scene: point, directional, constant, envmap. (Area emitters are
+// Emitters at the top level of a scene: point, spot, directional, constant, envmap. (Area emitters are
 // nested in shapes and loaded with them, shapes.cpp.)
 #pragma once
 #include <string>

@@ -24,7 +24,7 @@ const std::map<std::string, Category>& known_types() {
         {"roughdielectric", Category::Bsdf}, {"twosided", Category::Bsdf},         {"area", Category::Emitter},
         {"point", Category::Emitter},        {"directional", Category::Emitter},   {"constant", Category::Emitter},
         {"envmap", Category::Emitter},       {"bitmap", Category::Texture},        {"ref", Category::Ref},
-        {"rgb", Category::Texture}};
+        {"rgb", Category::Texture},          {"spot", Category::Emitter}};
     for (const auto& [name, kind] : shape_kinds())
       if (!t.emplace(name, Category::Shape).second) throw std::logic_error("shape kind '" + name + "' is already a known type");
     return t;

@@ -20,11 +20,39 @@ void load_sensor(Context& ctx, const json& j, const std::string& id) {
       cam.height = fp.integer("height", 576);
       if (cam.width <= 0 || cam.height <= 0 || cam.width > 32768 || cam.height > 32768)
         fp.fail("width and height must be in [1, 32768] (got " + std::to_string(cam.width) + " x " + std::to_string(cam.height) + ")");
+      // Mitsuba's crop window: the image is the window; the fov still covers the whole film.
+      if (fp.has("crop_offset_x") || fp.has("crop_offset_y") || fp.has("crop_width") || fp.has("crop_height")) {
+        cam.full_width = cam.width;
+        cam.full_height = cam.height;
+        cam.crop_x = fp.integer("crop_offset_x", 0);
+        cam.crop_y = fp.integer("crop_offset_y", 0);
+        cam.width = fp.integer("crop_width", cam.full_width - cam.crop_x);
+        cam.height = fp.integer("crop_height", cam.full_height - cam.crop_y);
+        if (cam.crop_x < 0 || cam.crop_y < 0 || cam.width <= 0 || cam.height <= 0 || cam.crop_x + cam.width > cam.full_width ||
+            cam.crop_y + cam.height > cam.full_height)
+          fp.fail("the crop window (offset " + std::to_string(cam.crop_x) + ", " + std::to_string(cam.crop_y) + ", size " +
+                  std::to_string(cam.width) + " x " + std::to_string(cam.height) + ") must lie inside the " +
+                  std::to_string(cam.full_width) + " x " + std::to_string(cam.full_height) + " film");
+      }
       for (const auto& [fk, fchild] : fp.children()) {
         fp.mark_used(fk);
         const std::string ft = type_of(*fchild);
-        if (ft != "box") ctx.scene->warnings.push_back(ctx.source + ": film '" + key + "': reconstruction filter '" + ft +
-                                                       "' is not supported; limn averages samples uniformly over each pixel (box)");
+        Props rp(ctx, *fchild, describe("rfilter", fk, ft));
+        if (ft == "box") {
+          cam.filter = FilmFilter{};
+        } else if (ft == "gaussian") {
+          cam.filter.type = FilmFilter::Type::Gaussian;
+          cam.filter.stddev = rp.number("stddev", 0.5f);
+          // Bounds: a support below a pixel would leave pixels between samples; 16 px keeps splats small.
+          if (!(cam.filter.stddev >= 0.25 && cam.filter.stddev <= 4.0))
+            rp.fail("stddev must be in [0.25, 4] pixels (got " + std::to_string(cam.filter.stddev) + ")");
+          cam.filter.radius = 4.0 * cam.filter.stddev;  // Mitsuba's cut-off
+        } else {
+          ctx.scene->warnings.push_back(ctx.source + ": film '" + key + "': reconstruction filter '" + ft +
+                                        "' is not supported (known: box, gaussian); limn uses box (uniform over each pixel)");
+          continue;
+        }
+        rp.check_unused();
       }
       fp.mark_used("pixel_format");
       fp.mark_used("component_format");

@@ -1,5 +1,7 @@
 #include "core/io/scene/shapes.h"
 
+#include <cmath>
+
 #include "core/io/scene/bsdfs.h"
 
 namespace limn::io_detail {
@@ -9,7 +11,7 @@ const std::map<std::string, ShapeLoader>& shape_kinds() {
   static const std::map<std::string, ShapeLoader> table = {
       {"obj", load_mesh_shape},     {"ply", load_mesh_shape},  {"mesh", load_mesh_shape},
       {"rectangle", load_mesh_shape}, {"cube", load_mesh_shape}, {"sphere", load_sphere},
-      {"heightfield", load_heightfield},
+      {"heightfield", load_heightfield}, {"disk", load_disk},
   };
   return table;
 }
@@ -49,7 +51,13 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       Props ep(ctx, *child, describe("emitter", id, ctype));
       AreaEmitter a;
       a.shape = int(ctx.scene->shapes.size());
-      a.radiance = ep.spectrum("radiance", Spectrum(1.0f));
+      a.radiance = ep.texture("radiance", Spectrum(1.0f));
+      if (const Bitmap* bm = a.radiance.bitmap.get())  // radiance is >= 0 (constants are checked by spectrum_value)
+        for (size_t i = 0; i < bm->rgb.size(); ++i)
+          if (!(std::isfinite(bm->rgb[i]) && bm->rgb[i] >= 0.0f))
+            ep.fail("radiance bitmap '" + bm->source + "': texel (row " + std::to_string(i / 3 / bm->width) + ", column " +
+                    std::to_string(i / 3 % bm->width) + ") channel " + std::to_string(i % 3) + " must be finite and >= 0 (got " +
+                    std::to_string(bm->rgb[i]) + ")");
       ep.check_unused();
       ctx.scene->emitters.push_back(Emitter{nested_id(p, *child, id), a});
       shape.emitter = int(ctx.scene->emitters.size() - 1);

@@ -20,6 +20,8 @@ const std::map<std::string, ShapeLoader>& shape_kinds();
 ShapeGeometry load_mesh_shape(const Props& p, const std::string& type, const Transform& to_world);
 // sphere (sphere.cpp).
 ShapeGeometry load_sphere(const Props& p, const std::string& type, const Transform& to_world);
+// disk (disk.cpp).
+ShapeGeometry load_disk(const Props& p, const std::string& type, const Transform& to_world);
 // heightfield (heightfield.cpp).
 ShapeGeometry load_heightfield(const Props& p, const std::string& type, const Transform& to_world);
 

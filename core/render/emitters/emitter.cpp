@@ -73,7 +73,7 @@ EmitterSample sample_emitter(const Emitter& e, const std::vector<Shape>& shapes,
       s.p = ps.p;
       s.position = ps;
       s.pdf = ps.pdf_area * dist2 / cos_light;
-      s.radiance = m.radiance;
+      s.radiance = m.radiance.eval(ps.uv);
     } else if constexpr (std::is_same_v<T, PointEmitter>) {
       Vec3 d = m.position - x;
       const float dist2 = glm::dot(d, d);
@@ -82,7 +82,7 @@ EmitterSample sample_emitter(const Emitter& e, const std::vector<Shape>& shapes,
       s.p = m.position;
       s.pdf = 1.0f;
       s.delta = true;
-      s.radiance = m.intensity / dist2;
+      s.radiance = m.intensity_towards(x) / dist2;
     } else if constexpr (std::is_same_v<T, DirectionalEmitter>) {
       s.wi = -m.direction;
       s.to_infinity = true;

@@ -14,11 +14,40 @@ namespace limn {
 
 struct AreaEmitter {
   int shape = -1;            // emits from the front side of this shape
-  Spectrum radiance{1.0f};
+  Texture radiance{Spectrum(1.0f), nullptr};  // a constant or a bitmap over the shape's uv
 };
+// A point light, isotropic or (Mitsuba's `spot`) with a linear falloff around `axis`: full
+// intensity within beam_width of the axis, falling linearly in angle to 0 at cutoff_angle.
 struct PointEmitter {
   Vec3 position{0.0f};
-  Spectrum intensity{1.0f};
+  Spectrum intensity{1.0f};  // W/sr (a spot's on its axis)
+  bool spot = false;
+  Vec3 axis{0, 0, 1};        // unit; the spot's direction (to_world's +z)
+  float cutoff = 0.0f, beam_width = 0.0f;  // radians, 0 <= beam_width <= cutoff < pi
+
+  // Falloff in [0, 1] for the cosine between the axis and the direction from the light; on the
+  // tape for T = ad::Var (continuous unless beam_width == cutoff, a hard edge).
+  template <typename T>
+  T falloff(const T& cos_theta) const {
+    using std::acos;
+    if (!spot || double(value_of(cos_theta)) >= std::cos(double(beam_width))) return T(1.0);
+    if (!(double(value_of(cos_theta)) > std::cos(double(cutoff)))) return T(0.0);
+    return (T(double(cutoff)) - acos(cos_theta)) * T(1.0 / (double(cutoff) - double(beam_width)));
+  }
+  // Intensity towards point x (W/sr).
+  Spectrum intensity_towards(const Vec3& x) const {
+    if (!spot) return intensity;
+    const Vec3 d = x - position;
+    const float len = glm::length(d);
+    return len > 0.0f ? intensity * float(falloff(double(glm::dot(axis, d)) / double(len))) : Spectrum(0.0f);
+  }
+  // A hard edge: the cone's boundary is a discontinuity of the lighting.
+  bool hard_edge() const { return spot && !(cutoff > beam_width); }
+
+ private:
+  static double value_of(double x) { return x; }
+  template <typename T>
+  static double value_of(const T& x) { return x.v; }
 };
 struct DirectionalEmitter {
   Vec3 direction{0, 0, -1};  // unit; the direction light travels in

@@ -9,7 +9,7 @@ bool emits_towards(const Scene& scene, const SurfaceInteraction& si, const Vec3&
 }
 
 Spectrum area_radiance(const Scene& scene, const SurfaceInteraction& si) {
-  return std::get<AreaEmitter>(scene.emitters[scene.shapes[si.shape].emitter].model).radiance;
+  return std::get<AreaEmitter>(scene.emitters[scene.shapes[si.shape].emitter].model).radiance.eval(si.uv);
 }
 
 }  // namespace

@@ -43,7 +43,7 @@ Image render(const Scene& scene, const RenderOptions& options, RenderStats* stat
         Pcg32 rng = pixel_rng(options.seed, uint64_t(y) * W + x);
         glm::dvec3 sum(0.0);
         for (int s = 0; s < spp; ++s) {
-          const Vec2 film = Vec2(float(x), float(y)) + rng.next_2d();  // box filter over the pixel
+          const Vec2 film = scene.camera.sample_film(x, y, rng.next_2d());
           const Spectrum L = path_radiance(scene, scene.camera.generate_ray(film), rng, counters, PathLimits{max_depth, true});
           if (is_finite(L) && L.x >= 0.0f && L.y >= 0.0f && L.z >= 0.0f) sum += glm::dvec3(L);
           else ++bad;

@@ -105,6 +105,39 @@ struct SphereKind {
   }
 };
 
+struct DiskKind {
+  using G = Disk;
+  static std::unique_ptr<Scene> scene() {
+    return scene_with_shape(R"({"type": "disk", "to_world": [{"scale": 0.8}, {"rotate": {"axis": [1, 0.5, 0], "angle": 50}},
+                                                            {"translate": [0.05, -0.1, 0.1]}]})");
+  }
+  static inline const std::vector<std::string> params = {"shape.radius", "shape.to_world.translation"};
+  static std::array<SurfacePoint, 2> neighbours(SurfacePoint sp, float h) {  // unit-disk coordinates
+    SurfacePoint a = sp, b = sp;
+    a.bary.x += sp.bary.x > 0.0f ? -h : h;
+    b.bary.y += sp.bary.y > 0.0f ? -h : h;
+    return {a, b};
+  }
+  static float clearance(const Scene&, const BoundarySegment&, const BoundaryPoint&) { return kInfinity; }
+  static std::optional<double> reference_hit(const Disk& d, const Ray& r) {
+    // In the disk's own frame (its rows), in double: the local z of o + t d is 0, then x^2 + y^2 <= 1.
+    const Vec3d o = Vec3d(r.o) - Vec3d(d.center), dir(r.d);
+    const double oz = glm::dot(o, Vec3d(d.n)), dz = glm::dot(dir, Vec3d(d.n));
+    if (dz == 0.0) return std::nullopt;
+    const double t = -oz / dz;
+    const double x = (glm::dot(o, Vec3d(d.s)) + t * glm::dot(dir, Vec3d(d.s))) / d.radius;
+    const double y = (glm::dot(o, Vec3d(d.t)) + t * glm::dot(dir, Vec3d(d.t))) / d.radius;
+    if (x * x + y * y > 1.0 || !(t > r.tmin && t < r.tmax)) return std::nullopt;
+    return t;
+  }
+  // The radius moves no point of the plane a probe hits: a ray aimed just beyond the rim misses,
+  // and hits once the disk has grown (the bounds Embree holds follow the radius).
+  static Ray beyond_the_rim(const Disk& d) {
+    const Vec3 target = d.center + 1.05f * d.radius * d.s;
+    return Ray{target + 2.0f * d.n, -d.n, 0.0f, kInfinity};
+  }
+};
+
 struct HeightfieldKind {
   using G = Heightfield;
   static std::unique_ptr<Scene> scene() {
@@ -218,7 +251,7 @@ bool line_meets_shape_near(const Scene& scene, const Vec3& p, const Vec3& w, con
 }  // namespace
 
 TEST_CASE_TEMPLATE("shape battery: intersection agrees with an independent answer, and rays leaving a hit do not re-hit it", K,
-                   MeshKind, SphereKind, HeightfieldKind) {
+                   MeshKind, SphereKind, HeightfieldKind, DiskKind) {
   auto scene = K::scene();
   const auto& g = geometry_of<K>(*scene);
   Pcg32 rng(7);
@@ -257,7 +290,7 @@ TEST_CASE_TEMPLATE("shape battery: intersection agrees with an independent answe
 }
 
 TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree with finite differences", K, MeshKind, SphereKind,
-                   HeightfieldKind) {
+                   HeightfieldKind, DiskKind) {
   auto scene = K::scene();
   for (const std::string& name : K::params) {
     CAPTURE(name);
@@ -334,7 +367,7 @@ TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree 
 }
 
 TEST_CASE_TEMPLATE("shape battery: boundary samples invert exactly and E[1/pdf] is the segments' measure", K, MeshKind, SphereKind,
-                   HeightfieldKind) {
+                   HeightfieldKind, DiskKind) {
   auto scene = K::scene();
   const DiffParams params(*scene, {K::params.front()});
   if constexpr (is_unsupported<BoundarySegments<typename K::G>>) {
@@ -374,7 +407,7 @@ TEST_CASE_TEMPLATE("shape battery: boundary samples invert exactly and E[1/pdf] 
   }
 }
 
-TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, MeshKind, SphereKind, HeightfieldKind) {
+TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, MeshKind, SphereKind, HeightfieldKind, DiskKind) {
   auto scene = K::scene();
   const DiffParams params(*scene, {K::params.front()});
   if constexpr (is_unsupported<BoundarySegments<typename K::G>>) {
@@ -416,7 +449,7 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
 }
 
 TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when bad, and reach the acceleration structure", K, MeshKind,
-                   SphereKind, HeightfieldKind) {
+                   SphereKind, HeightfieldKind, DiskKind) {
   auto scene = K::scene();
   // From above and in front (a heightfield is open below), at the shape's middle.
   const Ray probe{Vec3(0.05f, -2.2f, 1.6f), glm::normalize(Vec3(0.0f, 0.0f, 0.15f) - Vec3(0.05f, -2.2f, 1.6f)), 0.0f, kInfinity};
@@ -430,6 +463,18 @@ TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when ba
     const std::string quoted = "'" + name + "'";
     CHECK_THROWS_WITH_AS(set_values(*scene, name, base, bad, 1.0), doctest::Contains(quoted.c_str()), std::invalid_argument);
     CHECK(values_of(*scene, name) == base);  // rolled back
+    if constexpr (requires { K::beyond_the_rim(geometry_of<K>(*scene)); }) {
+      if (name.ends_with("radius")) {
+        const Ray rim = K::beyond_the_rim(geometry_of<K>(*scene));
+        SurfaceInteraction si;
+        CHECK(!scene->intersect(rim, si));
+        set_values(*scene, name, base, std::vector<double>(base.size(), 0.2), 0.5);
+        CHECK(scene->intersect(rim, si));
+        set_values(*scene, name, base, std::vector<double>(base.size(), 0.0), 0.0);
+        CHECK(!scene->intersect(rim, si));
+        continue;
+      }
+    }
     // A valid change (towards the probe's origin) reaches the acceleration structure.
     std::vector<double> grow(base.size(), 0.0);
     for (size_t i = 0; i < base.size(); ++i) grow[i] = name.ends_with("translation") || name.ends_with("center") ? (i % 3 == 1 ? -1.0 : 0.0)
