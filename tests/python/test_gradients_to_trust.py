@@ -34,6 +34,7 @@ def small_light_shadow():
     }
 
 
+@pytest.mark.term("boundary")
 def test_a_small_bright_lights_shadow_is_right_with_the_default_options():
     """The default guide (projective, seeded also from emitter samples) finds the shadow edges of
     a light 0.05 across; uniform boundary samples almost never do (at equal samples their error
@@ -72,6 +73,7 @@ def glossy_plane(distribution: str, alpha: float):
     return d
 
 
+@pytest.mark.term("interior", "boundary")
 @pytest.mark.parametrize("distribution", ["ggx", "beckmann"])
 @pytest.mark.parametrize("alpha", [1e-3, 3e-4, 1e-4])
 def test_small_alpha_derivatives_agree_with_fd(distribution, alpha):
@@ -120,6 +122,7 @@ def sums(stack):
 
 @pytest.mark.parametrize("subdivisions,light,face_normals", [(2, "sun", False), (2, "sun", True), (4, "sky", False), (4, "sky", True)],
                          ids=["smooth-terminator", "flat-terminator", "smooth-fine-outline", "flat-fine-outline"])
+@pytest.mark.term("primary", "interior")
 def test_mesh_outlines_and_terminators_agree_with_fd(subdivisions, light, face_normals):
     """Scaling an icosphere: the derivative image's sum agrees with central differences. Two
     primary-term faults made these fail (docs/derivatives.md, "Smooth shading"): smooth meshes had
@@ -153,6 +156,7 @@ def smooth_roof():
             "sky": {"type": "constant", "radiance": 1.0}}
 
 
+@pytest.mark.term("interior")
 def test_the_smooth_shading_horizon_term_agrees_with_fd():
     """Lifting one eave turns that strip's geometric normal; the leak test's cut at its geometric
     horizon turns with it, through light the shading hemisphere accepts. With the horizon term

@@ -99,6 +99,7 @@ def test_each_term_switches_off_and_the_terms_add_up():
     np.testing.assert_array_equal(render(spp=8, spp_interior=0, spp_boundary=16), boundary)
 
 
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_moving_occluder_shadow(light, spp_boundary):
     scene = load(shadow_scene(light))
@@ -109,6 +110,7 @@ def test_moving_occluder_shadow(light, spp_boundary):
     assert any("indirect boundary: " + str(spp_boundary) in line for line in scene.last_stats["summary"])
 
 
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_moving_receiver_under_a_static_occluder(light, spp_boundary):
     """The floor rises under a static box: the boundary (the box's edges) does not move, the
@@ -121,6 +123,7 @@ def test_moving_receiver_under_a_static_occluder(light, spp_boundary):
     check_term(scene, "floor.to_world.translation", np.float32([0, 0, 1]), spp_boundary, 10, eps=5e-3, fd_spp=8192)
 
 
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 def test_self_shadowing_under_deformation(light, spp_boundary):
     """Bumps of one mesh shadow the mesh itself under a low light, and the deformation (the bumps
@@ -136,6 +139,7 @@ def glossy_scene(emitter_reflectance):
     return validation("glossy_reflection_reflective_emitter" if emitter_reflectance else "glossy_reflection")
 
 
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("emitter_reflectance", [0.0, 0.5])
 def test_silhouette_seen_in_a_glossy_reflection(emitter_reflectance):
     """The paper's test scene (a shape in front of a large area emitter, seen in a rough conductor
@@ -148,6 +152,7 @@ def test_silhouette_seen_in_a_glossy_reflection(emitter_reflectance):
     check_term(scene, "shape.vertex_positions", x_translation(scene, "shape.vertex_positions"), 512, 6)
 
 
+@pytest.mark.term("boundary")
 def test_emitting_occluder_seen_in_a_glossy_reflection():
     """A bright emitting cube moves in front of a dim emitter, seen in the rough plane. The interior
     term attaches the cube's points to it (material form), so the boundary jump is the dim
@@ -173,6 +178,7 @@ def test_backward_matches_forward_with_all_terms():
     assert abs(lhs - rhs) <= 1e-3 * abs(rhs), (lhs, rhs)
 
 
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("light,spp_boundary", [(POINT, 16), (AREA, 512)], ids=["point light", "area light"])
 @pytest.mark.parametrize("name,t", [("ball.center", [1.0, 0.0, 0.0]), ("ball.radius", 1.0)], ids=["centre", "radius"])
 def test_moving_sphere_shadow(light, spp_boundary, name, t):
@@ -185,6 +191,7 @@ def test_moving_sphere_shadow(light, spp_boundary, name, t):
     assert any("1 sphere surfaces" in line for line in scene.last_stats["summary"]), scene.last_stats["summary"]
 
 
+@pytest.mark.term("boundary")
 def test_sphere_seen_in_a_glossy_reflection():
     scene = load(validation("sphere_glossy_reflection"))
     check_term(scene, "shape.center", np.float32([1, 0, 0]), 512, 6)
@@ -197,6 +204,7 @@ def area_shadow_with_fd():
     return scene, name, t, fd
 
 
+@pytest.mark.term("boundary")
 def test_grid_guiding_agrees_and_lowers_the_error():
     """Area-light shadow: the path-space baseline grid (random points per cell) must agree with
     finite differences and, at equal boundary samples, beat uniform sampling of the boundary
@@ -217,6 +225,7 @@ def test_grid_guiding_agrees_and_lowers_the_error():
     assert err(grid) < err(uniform), (err(grid), err(uniform))
 
 
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("sampler", ["stratified", "independent"])
 @pytest.mark.parametrize("guiding", ["grid", "octree"])
 def test_projective_guiding_agrees_with_fd(guiding, sampler):
@@ -383,6 +392,7 @@ def near_specular_sphere(size=24):
     return scene, name, t, ref, float(np.sqrt((ref ** 2).mean()))
 
 
+@pytest.mark.term("boundary")
 def test_octree_training_round_lowers_the_error():
     """The octree's training round (octree_training samples per pixel from the projective grid and its
     direction histogram; the under-sampled ones join the projections as the octree's points) is said
@@ -410,6 +420,7 @@ def test_octree_training_round_lowers_the_error():
     assert trained < 0.7 * untrained, (trained, untrained)
 
 
+@pytest.mark.term("boundary")
 def test_projective_guiding_beats_uniform_on_a_near_specular_reflection():
     """The projective-sampling paper's test scene (scenes/projective/sphere.json: a sphere seen
     only in a GGX alpha = 0.005 plane in front of a large emitter), at equal boundary samples: the
@@ -430,6 +441,7 @@ def test_projective_guiding_beats_uniform_on_a_near_specular_reflection():
     assert octree < uniform, (octree, uniform)
 
 
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("guiding", ["none", "grid", "octree"])
 def test_guided_gradients_stay_finite_on_awkward_meshes(guiding):
     """Open edges, a non-manifold fin, sliver triangles and grazing light: projections hit

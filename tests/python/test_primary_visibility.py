@@ -28,6 +28,7 @@ def quiet(fn, *args, **kw):
         return fn(*args, **kw)
 
 
+@pytest.mark.term("primary")
 def test_sphere_silhouette_matches_the_analytic_derivative():
     """An emitting sphere against black: the image is L times its projected area, so the sum of the
     derivative image is L dA/dr (the interior term is zero here)."""
@@ -43,6 +44,7 @@ def test_sphere_silhouette_matches_the_analytic_derivative():
     assert abs(off.sum()) < 1e-3 * L * dA  # switched off, nothing is left: the whole effect is the boundary
 
 
+@pytest.mark.term("primary")
 def test_mesh_silhouette_matches_the_analytic_derivative():
     """An emitting square facing the camera, scaled about its centre: d(area)/d(scale) = 2 area."""
     L = 2.0
@@ -71,6 +73,7 @@ SHAPES = {
 }
 
 
+@pytest.mark.term("primary")
 @pytest.mark.parametrize("kind", list(SHAPES))
 def test_silhouettes_against_finite_differences(tmp_path, kind):
     """A convex object alone in an environment: moving it changes only what the camera sees
@@ -89,6 +92,7 @@ def test_silhouettes_against_finite_differences(tmp_path, kind):
     assert np.abs(z_off).max() > 10, z_off  # without the boundary term the silhouettes' blocks are far off
 
 
+@pytest.mark.term("primary")
 def test_occluded_silhouettes_contribute_nothing():
     scene = limn.load_dict({
         **emitting({"type": "sphere", "radius": 0.5, "emitter": {"type": "area", "radiance": 2.0}}),
