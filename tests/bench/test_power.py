@@ -98,7 +98,8 @@ def run(node: str, env_extra: dict, timeout: float) -> dict:
 
 
 def scaled(node, term, k, args, memo=True):
-    env = {"LIMN_TERM_SCALE": f"{term}={k:g}"}
+    """`term`: one term, or several joined by '+' (all scaled by k together)."""
+    env = {"LIMN_TERM_SCALE": ",".join(f"{t}={k:g}" for t in term.split("+"))}
     if memo and args.memo:
         env["LIMN_TERM_MEMO"] = args.memo
     return run(node, env, args.timeout)
@@ -282,8 +283,9 @@ def main():
     results = load(args.results)
     if args.job == "power":
         for item in collect(args.select):
-            for term in item["terms"]:
-                if args.terms and term not in args.terms:
+            # power="zero": the named terms switched off together (an optimisation or a demo)
+            for term in (["+".join(item["terms"])] if item["power"] == "zero" else item["terms"]):
+                if args.terms and not set(term.split("+")) & set(args.terms):
                     continue
                 measure(item, term, args, results)
                 save(results, args.results)

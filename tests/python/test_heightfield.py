@@ -354,7 +354,10 @@ def test_albedo_texture_derivative_in_a_heightfield_scene(tmp_path):
 @pytest.mark.term("interior", "boundary", power="zero")
 def test_cli_heightfield_demo_runs_and_writes_its_results(tmp_path):
     """python3 -m limn demo heightfield: a few iterations of the terrain task write the renders,
-    the heights and a history with the height error."""
+    the heights and a history with the height error, and the heights move towards the truth from
+    the first step on (measured: height RMSE 0.2093, 0.2036, 0.1994, then 0.1951 after the third
+    step). With render_backward returning zeros the field stays flat and the RMSE stays put (this
+    test used to accept that: it only asked for the RMSE not to grow by more than 5 %)."""
     import subprocess
     import sys
     r = subprocess.run([sys.executable, "-m", "limn", "demo", "heightfield", "--task", "terrain", "--iterations", "3",
@@ -362,6 +365,10 @@ def test_cli_heightfield_demo_runs_and_writes_its_results(tmp_path):
     assert r.returncode in (0, 1), r.stderr  # 1: the loss did not drop in 3 noisy iterations
     assert "height RMSE" in r.stdout
     history = json.load(open(tmp_path / "terrain_history.json"))
-    assert history["iterations"] == 3 and history["final_height_rmse"] < history["initial_height_rmse"] * 1.05
-    assert np.load(tmp_path / "terrain_heights.npy").shape == (33, 33)
+    assert history["iterations"] == 3
+    rmse = [h["height_rmse"] for h in history["history"]] + [history["final_height_rmse"]]
+    assert all(b < a for a, b in zip(rmse, rmse[1:])), rmse
+    assert history["final_height_rmse"] < 0.97 * history["initial_height_rmse"], rmse
+    heights = np.load(tmp_path / "terrain_heights.npy")
+    assert heights.shape == (33, 33) and np.abs(heights).max() > 0.05  # the flat start moved
     assert (tmp_path / "terrain_view3_result.png").exists() and (tmp_path / "terrain_view0_target.png").exists()

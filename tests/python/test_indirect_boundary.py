@@ -322,19 +322,46 @@ def test_grid_octaves_option():
             scene.render_forward({name: t}, spp=1, guiding="grid", grid_octaves=bad)
 
 
+# The derivative options' defaults as docs/derivatives.md and help(Scene.render_forward) state them,
+# written out here (not read from the core): a change of a default must change this table too.
+DOCUMENTED_DEFAULTS = {
+    "boundary_sampler": "stratified", "threads": 0, "guiding": "auto", "projective": True, "project_seed": "both",
+    "grid_resolution": 64, "grid_octaves": 2, "guiding_spp": 4, "guiding_seeds": None, "octree_slices": 100,
+    "octree_max_depth": 9, "octree_leaf_samples": 8, "octree_max_leaves": 1048576, "octree_refine_rounds": 2,
+    "octree_refine_factor": 1.0, "octree_grid_mix": 0.5, "octree_training": 512, "direction_mix": 0.2,
+    "direction_resolution": 256, "direction_octaves": 2, "guide_refresh": 8, "guide_refresh_threshold": 0.02,
+    "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
+    "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True, "theta_subrange": 0.0,
+    "shading_horizon": True, "max_depth": None,
+}
+
+
 def test_option_defaults_are_the_core_ones():
-    """The C++ DiffOptions states every default (help(Scene.render_forward) lists them) and
-    validates every value (the Python layer only converts): an option given in Python reaches the
-    guide, the octree's uniform samples per leaf, said in the summary at the default and when set;
-    a bad value is refused by the core, naming the option."""
+    """The C++ DiffOptions states every default and validates every value (the Python layer only
+    converts). The core's defaults, Scene.DIFF_OPTIONS and the defaults listed in
+    help(Scene.render_forward) are the documented ones (DOCUMENTED_DEFAULTS, written out above);
+    the docstring's own text names every option; a call that gives every option at its documented
+    default computes the same image as a call that gives none (so no layer substitutes a default of
+    its own); an option given in Python reaches the guide, the octree's uniform samples per leaf,
+    said in the summary at the default and when set; a bad value is refused by the core, naming the
+    option."""
     from limn import _core
     core = _core.diff_option_defaults()
+    counts = ("spp", "spp_interior", "spp_primary", "spp_boundary", "seed")
+    assert {k: v for k, v in core.items() if k not in counts} == pytest.approx(DOCUMENTED_DEFAULTS, rel=1e-6)
+    assert limn.Scene.DIFF_OPTIONS == DOCUMENTED_DEFAULTS
     doc = limn.Scene.render_forward.__doc__
-    for name, value in core.items():
-        if name in ("spp", "spp_interior", "spp_primary", "spp_boundary", "seed"):
-            continue  # arguments of their own, documented in the signature
-        shown = f"{name}={value!r}" if not isinstance(value, float) else f"{name}={float(f'{value:.6g}')!r}"
-        assert shown in doc, f"{shown} not in help(Scene.render_forward)"
+    prose, _, listed = doc.partition("Defaults (core/diff/diff_options.h):")
+    for name, value in DOCUMENTED_DEFAULTS.items():
+        assert f"``{name}``" in prose or f"``{name}=" in prose, f"help(Scene.render_forward) does not describe ``{name}``"
+        assert f"{name}={value!r}" in " ".join(listed.split()), f"{name}={value!r} not listed in help(Scene.render_forward)"
+    explicit = {k: v for k, v in DOCUMENTED_DEFAULTS.items() if v is not None}
+    images = []
+    for options in ({}, explicit):
+        scene, name, t = moving_box()  # a scene each: its own guide cache
+        images.append(quiet(scene.render_forward, {name: t}, spp=4, spp_boundary=32, seed=3, **options))
+    np.testing.assert_array_equal(images[0], images[1])
+    assert np.abs(images[0]).max() > 0
     scene, name, t = moving_box()
     guide_line = partial(indirect_summary, scene, {name: t}, guiding="octree", octree_training=0)
     assert f"{core['octree_leaf_samples']} uniform samples per leaf" in guide_line()
