@@ -78,8 +78,8 @@ def cases():
     c = {
         "occluder_point": lambda: check_term_case("occluder, point light", tib.load(tib.shadow_scene(P)), "box.vertex_positions", None, 16),
         "occluder_area": lambda: check_term_case("occluder, area light", tib.load(tib.shadow_scene(A)), "box.vertex_positions", None, 512),
-        "receiver_point": lambda: check_term_case("receiver, point light (32 FD images)", tib.load(tib.shadow_scene(P)),
-                                                  "floor.to_world.translation", np.float32([0, 0, 1]), 16, eps=5e-3, fd_spp=8192, fd_seeds=32),
+        "receiver_point": lambda: check_term_case("receiver, point light (64 FD images)", tib.load(tib.shadow_scene(P)),
+                                                  "floor.to_world.translation", np.float32([0, 0, 1]), 16, eps=5e-3, fd_spp=8192, fd_seeds=64),
         "receiver_area": lambda: check_term_case("receiver, area light", tib.load(tib.shadow_scene(A)), "floor.to_world.translation",
                                                  np.float32([0, 0, 1]), 512, eps=5e-3, fd_spp=8192),
         "self_point": lambda: check_term_case("self-shadowing, point light", tib.load(tib.validation("self_shadow_point")),
