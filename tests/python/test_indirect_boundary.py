@@ -169,11 +169,13 @@ def test_emitting_occluder_seen_in_a_glossy_reflection():
     """A bright emitting cube moves in front of a dim emitter, seen in the rough plane. The interior
     term attaches the cube's points to it (material form), so the boundary jump is the dim
     background alone; counting the cube's own radiance in the jump as well (L_fg - L_bg, right only
-    for directions held fixed) put block z-scores above 10 here. 24 seeds: at 8 the test passed
-    with the term scaled anywhere in [0.5, 2] (block |z| 2.2 at 0.8, 2.1 at 1.25; projected onto the
-    term 3.9 and 4.2; docs/reports/test_power.md)."""
+    for directions held fixed) put block z-scores above 10 here.
+    NOT YET POWERFUL ENOUGH (docs/reports/test_power.md): it passes with the term scaled by 0.8 and
+    by 1.25. Block |z| 2.2 and 2.1, projected onto the term 3.9 and 4.2; 24 seeds gave 3.5 / 4.6 and
+    4.0 / 3.2, no better, at 3 times the cost. The projection makes it fail at 0.5 and 2 (block
+    test alone: passes in [0.5, 2])."""
     scene = load(validation("emitting_occluder_reflection"))
-    check_term(scene, "shape.vertex_positions", x_translation(scene, "shape.vertex_positions"), 512, 6, seeds=24)
+    check_term(scene, "shape.vertex_positions", x_translation(scene, "shape.vertex_positions"), 512, 6)
 
 
 def test_backward_matches_forward_with_all_terms():
