@@ -8,6 +8,39 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENES = os.path.join(ROOT, "scenes")
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+# ---- test power (tests/bench/test_power.py, docs/reports/test_power.md) ---------------------------
+# LIMN_TERM_SCALE="boundary=0.8" scales that derivative term by k in every render_forward /
+# render_backward call (term_scale.py; without the variable nothing changes). A render-level
+# derivative test names the term(s) whose value it checks with @pytest.mark.term(...).
+TERM_HOOK_VARIABLES = ("LIMN_TERM_SCALE", "LIMN_TERM_MEMO", "LIMN_SEED_OFFSET")
+if any(os.environ.get(v) for v in TERM_HOOK_VARIABLES):
+    import term_scale
+    term_scale.install()
+    site = os.path.join(HERE, "term_scale_site")  # the hook in subprocesses too (CLI demos)
+    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (site, HERE, os.environ.get("PYTHONPATH")) if p)
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "term(*names): a render-level derivative test of these terms (interior, primary, boundary); "
+                   "tests/bench/test_power.py runs it with each term scaled by k (docs/reports/test_power.md)")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        for mark in item.iter_markers("term"):
+            bad = [n for n in mark.args if n not in ("interior", "primary", "boundary")] or not mark.args
+            if bad:
+                raise pytest.UsageError(f"{item.nodeid}: @pytest.mark.term needs terms among interior, primary, "
+                                        f"boundary (got {mark.args})")
+
+
+def pytest_report_header(config):
+    if any(os.environ.get(v) for v in TERM_HOOK_VARIABLES):
+        return "limn term hook: " + ", ".join(f"{v}={os.environ[v]}" for v in TERM_HOOK_VARIABLES if os.environ.get(v))
 
 
 def scene_json(folder: str, name: str) -> dict:

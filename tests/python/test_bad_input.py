@@ -1,8 +1,8 @@
 """Bad input: every problem is a ValueError that names the file, the object and the bad value."""
 from __future__ import annotations
 
-import copy
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -170,20 +170,46 @@ def test_unused_parameters_warn():
         limn.load_dict(d)
 
 
-@pytest.mark.filterwarnings("ignore::UserWarning")  # garbage values also trigger "unused parameter" warnings
-def test_nothing_crashes_on_random_garbage():
-    rng = np.random.default_rng(1)
-    base = sphere_over_plane()
-    keys = [("ball", "radius"), ("ball", "center"), ("floor", "to_world"), ("sensor", "fov"), ("light", "emitter")]
-    garbage = [None, "x", -5, 1e300, [], {}, [1, 2, 3, 4], {"type": 3}, [[1, 2], [3]], True]
-    for _ in range(60):
-        d = copy.deepcopy(base)
-        obj, key = keys[rng.integers(len(keys))]
-        d[obj][key] = garbage[rng.integers(len(garbage))]
+GARBAGE = [None, "x", -5, 1e300, [], {}, [1, 2, 3, 4], {"type": 3}, [[1, 2], [3]], True]
+
+
+def load_and_render_garbage(obj, key, value):
+    """sphere_over_plane with d[obj][key] = value, loaded and rendered at 1 spp. Returns the
+    warnings' messages, or None when loading raised a ValueError naming the object or the key."""
+    d = sphere_over_plane()
+    d[obj][key] = value
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         try:
             limn.load_dict(d).render(spp=1)
         except ValueError as e:
             assert obj in str(e) or key in str(e), str(e)
+            return None
+    return [str(w.message) for w in caught]
+
+
+def test_nothing_crashes_on_random_garbage():
+    """Garbage values are refused naming the object or the key, or accepted as what they can mean
+    (an empty transform list is the identity); a garbage value is never dropped with an "unused
+    parameter" warning, which would render a different scene than the one described."""
+    rng = np.random.default_rng(1)
+    keys = [("ball", "radius"), ("ball", "center"), ("floor", "to_world"), ("sensor", "fov")]
+    for _ in range(60):
+        obj, key = keys[rng.integers(len(keys))]
+        value = GARBAGE[rng.integers(len(GARBAGE))]
+        messages = load_and_render_garbage(obj, key, value)
+        if messages is not None:
+            assert not any(f"unused parameter '{key}'" in m for m in messages), (obj, key, value, messages)
+            assert all(obj in m for m in messages), (obj, key, value, messages)
+
+
+@pytest.mark.xfail(strict=True, reason="needs a core change (scene loader): a shape's 'emitter' that is not an emitter "
+                                       "object (null, a number, a string, a list, {} or {'type': 3}) is only warned "
+                                       "about as an unused parameter and the shape loads without its emitter, here "
+                                       "the scene's only area light")
+@pytest.mark.parametrize("value", GARBAGE, ids=[repr(v) for v in GARBAGE])
+def test_a_garbage_emitter_is_refused_not_dropped(value):
+    assert load_and_render_garbage("light", "emitter", value) is None, f"emitter {value!r} loaded without its light"
 
 
 def test_ragged_and_mistyped_values():

@@ -24,6 +24,7 @@ SMALL_LIGHT_SPP = 256  # the default guide is the octree from 256 boundary sampl
 SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scenes")
 
 
+@pytest.mark.term("boundary")
 def test_a_small_bright_lights_shadow_is_right_with_the_default_options():
     """scenes/validation/small_light_shadow.json: a sphere light of radius 0.05 at radiance 1000, a
     smooth icosphere occluder off screen, its shadow on the floor. The default guide finds the
@@ -71,6 +72,7 @@ def z_against_fd(scene, name, t, eps, spp, seeds=6):
     return z
 
 
+@pytest.mark.term("interior")
 @pytest.mark.parametrize("distribution", ["ggx", "beckmann"])
 @pytest.mark.parametrize("alpha", [1e-3, 3e-4, 1e-4])
 def test_small_alpha_roughness_derivative_agrees_with_fd(distribution, alpha):
@@ -84,6 +86,7 @@ def test_small_alpha_roughness_derivative_agrees_with_fd(distribution, alpha):
     assert np.abs(z).max() < 5.0, z
 
 
+@pytest.mark.term("interior")
 @pytest.mark.parametrize("distribution", ["ggx", "beckmann"])
 @pytest.mark.parametrize("alpha", [1e-3, 1e-4])
 def test_a_narrow_lobe_under_a_uniform_sky_has_no_roughness_derivative(distribution, alpha):
@@ -109,7 +112,7 @@ def test_a_narrow_lobe_under_a_uniform_sky_has_no_roughness_derivative(distribut
     assert abs(mean - fd) < 4 * err
 
 
-@pytest.mark.term
+@pytest.mark.term("boundary")
 @pytest.mark.parametrize("distribution", ["ggx", "beckmann"])
 def test_a_silhouette_seen_in_a_near_mirror_agrees_with_fd(distribution):
     """The cube's derivative seen in a conductor of alpha 1e-3, five times narrower than the
@@ -148,6 +151,7 @@ def sums(stack):
 
 @pytest.mark.parametrize("subdivisions,light,face_normals", [(2, "sun", False), (2, "sun", True), (4, "sky", False), (4, "sky", True)],
                          ids=["smooth-terminator", "flat-terminator", "smooth-fine-outline", "flat-fine-outline"])
+@pytest.mark.term("primary", "interior")
 def test_mesh_outlines_and_terminators_agree_with_fd(subdivisions, light, face_normals):
     """Scaling an icosphere: the derivative image's sum agrees with central differences. Two
     primary-term faults made these fail (docs/derivatives.md, "Smooth shading"): smooth meshes had
@@ -181,6 +185,7 @@ def smooth_roof():
             "sky": {"type": "constant", "radiance": 1.0}}
 
 
+@pytest.mark.term("interior")
 def test_the_smooth_shading_horizon_term_agrees_with_fd():
     """Lifting one eave turns that strip's geometric normal; the leak test's cut at its geometric
     horizon turns with it, through light the shading hemisphere accepts. With the horizon term
@@ -200,7 +205,7 @@ def test_the_smooth_shading_horizon_term_agrees_with_fd():
     assert abs(mo - mf) > 6.0 * np.hypot(eo, ef)
 
 
-@pytest.mark.term
+@pytest.mark.term("primary", "boundary")
 def test_a_smooth_open_vessel_over_a_floor_agrees_with_fd():
     """scenes/validation/smooth_vessel.json: a smooth-shaded open surface of revolution (a teapot's
     body without its lid) on a floor under an area light, stretched upward. Outline, terminator,

@@ -44,6 +44,7 @@ def compare(scene, tangents, seeds=16, spp=32, fd_spp=512, eps=2e-2, **options):
     return block_z(on, fd), block_z(off, fd), on, fd
 
 
+@pytest.mark.term("boundary", "interior")
 def test_cone_growing_agrees_with_fd_and_needs_the_reparameterisation():
     """Figure 7, geometry: the cone grows along z; its shadow edge and its silhouette against the
     ground move. Without the moving split points (the reparameterisation) the estimate is far off."""
@@ -103,6 +104,7 @@ def test_interval_choice_removes_the_sliver_tail_and_every_camera_interval_the_r
     assert var_e < 0.3 * var_m
 
 
+@pytest.mark.term("boundary")  # not "interior": without the reparameterisation the estimate is 1e-4 of it (mean |pixel|)
 def test_moving_light_agrees_with_fd():
     """Figure 7, light: the area light moves up; the shadow edges move with it (through the emitter
     edges, which are split points) and the lit side changes smoothly."""
@@ -116,6 +118,7 @@ def test_moving_light_agrees_with_fd():
     assert np.abs(z_off).max() > 8.0, z_off
 
 
+@pytest.mark.term("boundary", "interior")
 def test_terrain_under_global_illumination_agrees_with_fd():
     """A terrain (Figure 8's kind) under a sky and an area light, two bounces; the heights change
     by a smooth bump, which moves shadows, self-occlusion and silhouettes inside the field."""
@@ -141,6 +144,7 @@ def cells_visited(scene):
     return int(re.search(r"mipmap nodes and (\d+) cells", line).group(1))
 
 
+@pytest.mark.term("boundary", "interior")
 def test_worst_case_bump_and_the_mipmap():
     """Figure A2: a smooth bump under a very large area light. The estimate agrees with FD; the
     mipmap search gives the same image as the brute-force search (the same peaks) with fewer cells
@@ -168,6 +172,7 @@ def test_worst_case_bump_and_the_mipmap():
         assert np.abs(z).max() < 5.0, (options, z)
 
 
+@pytest.mark.term("interior")
 def test_primal_value_of_the_estimator_is_the_image():
     """The estimator samples differently from the path tracer but estimates the same image: with no
     sky the image is linear in the light's radiance, so its derivative along the radiance is the
@@ -184,6 +189,7 @@ def test_primal_value_of_the_estimator_is_the_image():
     assert abs(est.mean() - ref.mean()) < 0.02 * ref.mean()
 
 
+@pytest.mark.term("interior")
 def test_reflectance_derivative_in_a_heightfield_scene():
     d = scene_dict("cone")
     scene = load(d)
@@ -326,6 +332,7 @@ def test_other_occluders_are_counted_and_warned():
         scene.render_forward({}, spp=1)
 
 
+@pytest.mark.term("interior")
 def test_albedo_texture_derivative_in_a_heightfield_scene(tmp_path):
     """An albedo texture on the heightfield (uv = x / width + 1/2, y / depth + 1/2): the texels'
     derivative, here along the texture itself, agrees with finite differences."""
@@ -344,9 +351,13 @@ def test_albedo_texture_derivative_in_a_heightfield_scene(tmp_path):
     assert np.abs(est).max() > 0.01
 
 
+@pytest.mark.term("interior", "boundary", power="zero")
 def test_cli_heightfield_demo_runs_and_writes_its_results(tmp_path):
     """python3 -m limn demo heightfield: a few iterations of the terrain task write the renders,
-    the heights and a history with the height error."""
+    the heights and a history with the height error, and the heights move towards the truth from
+    the first step on (measured: height RMSE 0.2093, 0.2036, 0.1994, then 0.1951 after the third
+    step). With render_backward returning zeros the field stays flat and the RMSE stays put (this
+    test used to accept that: it only asked for the RMSE not to grow by more than 5 %)."""
     import subprocess
     import sys
     r = subprocess.run([sys.executable, "-m", "limn", "demo", "heightfield", "--task", "terrain", "--iterations", "3",
@@ -354,6 +365,10 @@ def test_cli_heightfield_demo_runs_and_writes_its_results(tmp_path):
     assert r.returncode in (0, 1), r.stderr  # 1: the loss did not drop in 3 noisy iterations
     assert "height RMSE" in r.stdout
     history = json.load(open(tmp_path / "terrain_history.json"))
-    assert history["iterations"] == 3 and history["final_height_rmse"] < history["initial_height_rmse"] * 1.05
-    assert np.load(tmp_path / "terrain_heights.npy").shape == (33, 33)
+    assert history["iterations"] == 3
+    rmse = [h["height_rmse"] for h in history["history"]] + [history["final_height_rmse"]]
+    assert all(b < a for a, b in zip(rmse, rmse[1:])), rmse
+    assert history["final_height_rmse"] < 0.97 * history["initial_height_rmse"], rmse
+    heights = np.load(tmp_path / "terrain_heights.npy")
+    assert heights.shape == (33, 33) and np.abs(heights).max() > 0.05  # the flat start moved
     assert (tmp_path / "terrain_view3_result.png").exists() and (tmp_path / "terrain_view0_target.png").exists()

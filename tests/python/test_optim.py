@@ -53,6 +53,7 @@ def test_losses_and_their_derivatives():
         assert (loss(a2, b)[0] - value) / eps == pytest.approx(float(grad[1, 2, 0]), rel=1e-2)
 
 
+@pytest.mark.term("interior", "primary", "boundary", power="zero")
 def test_fit_recovers_a_displaced_sphere():
     """Two views of a sphere whose vertices were pushed outwards; from the unit sphere, a few
     iterations must lower the loss and move the vertices towards the truth (interior and boundary
