@@ -38,7 +38,6 @@ const char* image_format(const std::string& path, const unsigned char* b, size_t
   if (starts("II*\0", 4) || starts("MM\0*", 4)) return "tiff";
   if (starts("BM", 2)) return "bmp";
   if (n >= 3 && b[0] == 'P' && ((b[1] >= '1' && b[1] <= '6') || b[1] == 'F' || b[1] == 'f') && std::isspace(b[2])) return "pnm";
-  if (n >= 12 && std::memcmp(b, "RIFF", 4) == 0 && std::memcmp(b + 8, "WEBP", 4) == 0) return "webp";
   if (lower_extension(path) == ".tga") return "targa";  // TGA has no signature
   return nullptr;
 }
@@ -48,6 +47,25 @@ std::string oiio_error(std::string e) {
   while (!e.empty() && (e.back() == '\n' || e.back() == ' ')) e.pop_back();
   for (size_t i = 0; (i = e.find('\n', i)) != std::string::npos;) e.replace(i, 1, "; ");
   return e.empty() ? "truncated or corrupt file" : printable(e, 300);
+}
+
+// libpng reads each chunk before IDAT whole into memory, as long as its length field says: every
+// chunk must fit in the file. Returns an error, or "".
+std::string check_png_chunks(const std::string& path, uint64_t file_size) {
+  std::ifstream f(path, std::ios::binary);
+  uint64_t at = 8;
+  for (int k = 0; k < 100000 && at + 12 <= file_size; ++k) {
+    unsigned char c[8];
+    f.seekg(std::streamoff(at));
+    if (!f.read(reinterpret_cast<char*>(c), 8)) return "cannot read the PNG chunk at byte " + std::to_string(at);
+    const uint64_t length = (uint64_t(c[0]) << 24) | (uint64_t(c[1]) << 16) | (uint64_t(c[2]) << 8) | c[3];
+    if (length > file_size - at - 12)
+      return "the PNG chunk '" + printable(std::string_view(reinterpret_cast<char*>(c + 4), 4)) + "' at byte " + std::to_string(at) + " claims " +
+             std::to_string(length) + " bytes, more than the file holds (truncated or corrupt)";
+    if (std::memcmp(c + 4, "IDAT", 4) == 0 || std::memcmp(c + 4, "IEND", 4) == 0) return "";  // image data: read by rows
+    at += 12 + length;
+  }
+  return "";
 }
 
 // OpenEXR allocates its table of chunk offsets from the header's data window when the file is
@@ -69,26 +87,47 @@ std::string check_exr_header(const std::string& path, uint64_t file_size) {
   if (version & 0x800) return "deep OpenEXR images are not supported";
   if (version & 0x1000) return "multi-part OpenEXR files are not supported (save a single part)";
   const bool tiled = version & 0x200;
+  const size_t max_name = (version & 0x400) ? 255 : 31;  // OpenEXR reads at most this many characters of a name
   size_t at = 8;
   bool have_window = false;
   int64_t w = 0, hgt = 0;
   int compression = 0;
   uint32_t tile_x = 0, tile_y = 0;
+  uint64_t pixel_bytes = 0;  // over all channels
   for (;;) {
     const size_t name_end = h.find('\0', at);
     if (name_end == std::string::npos) return "truncated OpenEXR header";
     if (name_end == at) break;  // the empty name closes the header
+    if (name_end - at > max_name) return "an OpenEXR attribute name longer than " + std::to_string(max_name) + " characters";
     const std::string name = h.substr(at, name_end - at);
     const size_t type_end = h.find('\0', name_end + 1);
     if (type_end == std::string::npos || type_end + 5 > h.size()) return "truncated OpenEXR header";
+    if (type_end - name_end - 1 > max_name) return "an OpenEXR attribute type name longer than " + std::to_string(max_name) + " characters";
     const uint32_t size = u32(type_end + 1);
     const size_t value = type_end + 5;
     if (size > h.size() - value) return "truncated OpenEXR header (attribute '" + printable(name, 40) + "')";
+    // Values that OpenEXR sizes by counts inside them, not by the attribute's size.
+    const std::string type = h.substr(name_end + 1, type_end - name_end - 1);
+    if (type == "preview" && (size < 8 || uint64_t(u32(value)) * u32(value + 4) * 4 != size - 8))
+      return "the OpenEXR preview image '" + printable(name, 40) + "' does not match its size";
+    if (type == "stringvector")
+      for (size_t k = 0; k < size;) {
+        if (size - k < 4 || u32(value + k) > size - k - 4) return "the OpenEXR string list '" + printable(name, 40) + "' overruns its size";
+        k += 4 + u32(value + k);
+      }
     if (name == "dataWindow" && size == 16) {
       const auto i32 = [&](size_t k) { return int64_t(int32_t(u32(value + 4 * k))); };
       w = i32(2) - i32(0) + 1;
       hgt = i32(3) - i32(1) + 1;
       have_window = true;
+    } else if (name == "channels" && type == "chlist") {
+      for (size_t k = value; k < value + size && h[k] != '\0';) {  // name, type, pLinear, reserved, xSampling, ySampling
+        const size_t end = h.find('\0', k);
+        if (end == std::string::npos || end + 17 > value + size) return "truncated OpenEXR channel list";
+        const uint32_t kind = u32(end + 1);
+        pixel_bytes += kind == 1 ? 2 : 4;
+        k = end + 17;
+      }
     } else if (name == "compression" && size == 1) {
       compression = uint8_t(h[value]);
     } else if (name == "tiles" && size == 9) {
@@ -101,13 +140,27 @@ std::string check_exr_header(const std::string& path, uint64_t file_size) {
   if (w < 1 || hgt < 1) return "empty OpenEXR data window (" + std::to_string(w) + " x " + std::to_string(hgt) + ")";
   if (uint64_t(w) * uint64_t(hgt) > kMaxImagePixels)
     return std::to_string(w) + " x " + std::to_string(hgt) + " pixels, more than the limit of " + std::to_string(kMaxImagePixels);
+  // OpenEXR allocates a chunk's pixels (tile or scanline block) when it opens the file, and limn all
+  // pixels: neither may take more than the file could expand to.
+  const uint64_t budget = kMaxImageExpansion * file_size + (uint64_t(1) << 20);
+  const uint64_t bpp = std::max<uint64_t>(pixel_bytes, 1);
+  if (uint64_t(w) * uint64_t(hgt) * bpp > budget)
+    return std::to_string(w) + " x " + std::to_string(hgt) + " pixels of " + std::to_string(bpp) + " bytes, more than a file of " +
+           std::to_string(file_size) + " bytes can hold (corrupt header?)";
+  if (tiled && (uint64_t(tile_x) * uint64_t(tile_y) > kMaxImagePixels || uint64_t(tile_x) * uint64_t(tile_y) * bpp > budget))
+    return "tiles of " + std::to_string(tile_x) + " x " + std::to_string(tile_y) + " pixels, more than a file of " + std::to_string(file_size) +
+           " bytes can hold (corrupt header?)";
   uint64_t chunks;
   if (tiled) {
     if (tile_x < 1 || tile_y < 1) return "the OpenEXR header has no valid tile size";
     chunks = ((uint64_t(w) + tile_x - 1) / tile_x) * ((uint64_t(hgt) + tile_y - 1) / tile_y);
   } else {
     static const int lines[] = {1, 1, 1, 16, 32, 16, 32, 32, 32, 256};  // per compression: none, rle, zips, zip, piz, pxr24, b44, b44a, dwaa, dwab
-    chunks = (uint64_t(hgt) + lines[compression < 10 ? compression : 0] - 1) / lines[compression < 10 ? compression : 0];
+    const uint64_t per_chunk = lines[compression < 10 ? compression : 0];
+    if (uint64_t(w) * per_chunk * bpp > budget)
+      return "blocks of " + std::to_string(per_chunk) + " scanlines of " + std::to_string(w) + " pixels, more than a file of " +
+             std::to_string(file_size) + " bytes can hold (corrupt header?)";
+    chunks = (uint64_t(hgt) + per_chunk - 1) / per_chunk;
   }
   if (chunks * 8 > file_size) return "truncated OpenEXR file (" + std::to_string(chunks) + " chunks cannot fit in " + std::to_string(file_size) + " bytes)";
   return "";
@@ -128,10 +181,12 @@ Bitmap read_image(const std::string& path, bool raw) {
   }
   const char* format = image_format(path, head, got);
   if (!format)
-    throw std::invalid_argument("image '" + name + "' is not a PNG, JPEG, OpenEXR, Radiance HDR, TIFF, BMP, PNM/PFM, WebP or TGA file (by its first bytes)");
-  if (std::strcmp(format, "openexr") == 0)
-    if (const std::string problem = check_exr_header(path, size); !problem.empty())
-      throw std::invalid_argument("cannot read image '" + name + "' (openexr): " + problem);
+    throw std::invalid_argument("image '" + name + "' is not a PNG, JPEG, OpenEXR, Radiance HDR, TIFF, BMP, PNM/PFM or TGA file (by its first bytes)");
+  // Checks of the headers whose sizes the libraries allocate by before limn sees the image size.
+  const std::string problem = std::strcmp(format, "openexr") == 0 ? check_exr_header(path, size)
+                              : std::strcmp(format, "png") == 0   ? check_png_chunks(path, size)
+                                                                  : std::string();
+  if (!problem.empty()) throw std::invalid_argument("cannot read image '" + name + "' (" + format + "): " + problem);
   // OpenImageIO's plugins report problems through their error state, but the libraries under them
   // (OpenEXR, libtiff) may also throw.
   try {
@@ -150,10 +205,20 @@ Bitmap read_image(const std::string& path, bool raw) {
                                   " pixels, more than the limit of " + std::to_string(kMaxImagePixels));
     // No format compresses real pixels better than about 1000:1 (deflate's limit): a header that
     // claims far more than the file can hold is corrupt, and is refused before memory is taken for it.
-    const uint64_t native_bytes = count * uint64_t(std::min(spec.nchannels, 4)) * uint64_t(std::max<size_t>(spec.format.size(), 1));
+    const uint64_t native_bytes = count * uint64_t(spec.nchannels) * uint64_t(std::max<size_t>(spec.format.size(), 1));
     if (native_bytes > kMaxImageExpansion * size + (uint64_t(1) << 20))
       throw std::invalid_argument("image '" + name + "' claims " + std::to_string(spec.width) + " x " + std::to_string(spec.height) +
                                   " pixels, more than a file of " + std::to_string(size) + " bytes can hold (corrupt header?)");
+    // OpenImageIO reads hundreds of rows (or tiles) at a time into a buffer of its own, whatever the
+    // image's height: the size of a row and of a tile is limited too.
+    const uint64_t pixel_bytes = std::max<uint64_t>(spec.pixel_bytes(true), 1);
+    if (uint64_t(spec.width) * pixel_bytes > kMaxImageRowBytes)
+      throw std::invalid_argument("image '" + name + "' has rows of " + std::to_string(spec.width) + " pixels of " + std::to_string(pixel_bytes) +
+                                  " bytes, more than the limit of " + std::to_string(kMaxImageRowBytes) + " bytes per row");
+    if (spec.tile_width > 0 && uint64_t(spec.tile_width) * uint64_t(std::max(spec.tile_height, 1)) * uint64_t(std::max(spec.tile_depth, 1)) * pixel_bytes >
+                                   kMaxImageRowBytes)
+      throw std::invalid_argument("image '" + name + "' has tiles of " + std::to_string(spec.tile_width) + " x " + std::to_string(spec.tile_height) +
+                                  " pixels, more than the limit of " + std::to_string(kMaxImageRowBytes) + " bytes per tile");
     const int nc = spec.nchannels >= 3 ? 3 : 1;  // RGB, or grey broadcast (alpha and extra channels are not read)
     Bitmap bm;
     bm.width = spec.width;
