@@ -8,7 +8,9 @@ gradient with respect to u is (I + lambda L)^-1 times the gradient with respect 
 a sparse Cholesky factorisation in the C++ core (Eigen)."""
 from __future__ import annotations
 
+import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,8 +22,15 @@ class Adam:
     """Adam (Kingma and Ba 2015) on one array, updated in place."""
 
     def __init__(self, x: np.ndarray, lr: float = 1e-2, betas=(0.9, 0.999), eps: float = 1e-8):
-        if not lr > 0:
-            raise ValueError(f"Adam: lr must be > 0 (got {lr})")
+        if not (math.isfinite(lr) and lr > 0):
+            raise ValueError(f"Adam: lr must be finite and > 0 (got {lr})")
+        betas = tuple(betas)
+        if len(betas) != 2 or not all(math.isfinite(b) and 0.0 <= b < 1.0 for b in betas):
+            raise ValueError(f"Adam: betas must be two numbers in [0, 1) (got {betas})")
+        if not (math.isfinite(eps) and eps > 0):
+            raise ValueError(f"Adam: eps must be finite and > 0 (got {eps})")
+        if not np.isfinite(x).all():
+            raise ValueError("Adam: the parameters have non-finite values")
         self.x, self.lr, self.b1, self.b2, self.eps = x, lr, betas[0], betas[1], eps
         self.m = np.zeros_like(x, dtype=np.float64)
         self.v = np.zeros_like(x, dtype=np.float64)
@@ -33,12 +42,16 @@ class Adam:
             raise ValueError(f"Adam: gradient shape {g.shape} != parameter shape {self.x.shape}")
         if not np.isfinite(g).all():
             raise ValueError("Adam: the gradient has non-finite values")
-        self.t += 1
-        self.m = self.b1 * self.m + (1 - self.b1) * g
-        self.v = self.b2 * self.v + (1 - self.b2) * g * g
-        m_hat = self.m / (1 - self.b1 ** self.t)
-        v_hat = self.v / (1 - self.b2 ** self.t)
-        self.x -= (self.lr * m_hat / (np.sqrt(v_hat) + self.eps)).astype(self.x.dtype)
+        with np.errstate(over="ignore", invalid="ignore"):
+            m = self.b1 * self.m + (1 - self.b1) * g
+            v = self.b2 * self.v + (1 - self.b2) * g * g
+            m_hat = m / (1 - self.b1 ** (self.t + 1))
+            v_hat = v / (1 - self.b2 ** (self.t + 1))
+            step = self.lr * m_hat / (np.sqrt(v_hat) + self.eps)
+        if not (np.isfinite(v).all() and np.isfinite(step).all()):  # the state and the parameters stay as they were
+            raise ValueError("Adam: the step is not finite (the gradient's square overflows)")
+        self.t, self.m, self.v = self.t + 1, m, v
+        self.x -= step.astype(self.x.dtype)
 
 
 def grid_faces(rows: int, columns: int) -> np.ndarray:
@@ -86,6 +99,12 @@ class FitResult:
     losses: list = field(default_factory=list)
     seconds: list = field(default_factory=list)   # elapsed time at each iteration
     cancelled: bool = False
+    diverged: str = ""   # why the loop stopped early, keeping the last good parameters ("" if it did not)
+
+
+# Divergence: one Adam step that moves any point by more than this share of the parameters'
+# bounding-box diagonal (the optimiser's steps are a small share of it when it converges).
+MAX_STEP = 0.5
 
 
 def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: float = 20.0, loss=l2, spp: int = 8,
@@ -96,6 +115,10 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
     ``lambda_`` (0 disables it); ``mask`` (N,) of 0/1 holds vertices with 0 fixed.
     ``callback(iteration, loss, vertices)`` may return False to stop (the last good state stays).
     ``options`` go to every ``render_backward`` call (e.g. ``guiding``, ``grid_resolution``).
+    The loop stops early and keeps the last good parameters, with a warning and
+    ``FitResult.diverged`` saying why, when the loss or the gradient is not finite, a step is not
+    finite or moves a point by more than ``MAX_STEP`` of the bounding-box diagonal, or the scene
+    refuses the new parameters (e.g. a triangle collapsed).
     A heightfield's ``"<id>.heights"`` (rows x columns) works the same way: ``faces`` from
     :func:`grid_faces`, ``mask`` of shape (rows * columns,) or (rows, columns)."""
     if not views:
@@ -113,6 +136,17 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
     u = precond.to_u(x) if precond else x.copy()
     opt = Adam(u, lr=lr)
     result = FitResult()
+    diagonal = float(np.linalg.norm(x.max(axis=0) - x.min(axis=0))) or 1.0
+
+    def stop(reason: str) -> FitResult:
+        result.diverged = reason
+        warnings.warn(f"fit: stopped at iteration {len(result.losses)}: {reason}; the parameters keep their last good values",
+                      stacklevel=3)
+        for s in scenes:  # the last good state, also where a refused update left it
+            s.params[name] = x.reshape(shape).astype(np.float32)
+            s.update()
+        return result
+
     t0 = time.perf_counter()
     for it in range(iterations):
         grad = np.zeros_like(x)
@@ -121,21 +155,41 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
             img = s.render(spp=spp, seed=seed + 7919 * it + k)
             value, adjoint = loss(img, target)
             total += value
-            g = s.render_backward(adjoint, spp=spp, spp_primary=spp_primary, spp_boundary=spp_boundary,
-                                  seed=seed + 104729 * it + k, **(options or {}))
+            try:
+                g = s.render_backward(adjoint, spp=spp, spp_primary=spp_primary, spp_boundary=spp_boundary,
+                                      seed=seed + 104729 * it + k, **(options or {}))
+            except ValueError as e:
+                if "overflowed" not in str(e):
+                    raise
+                return stop(str(e))
             grad += g[name].reshape(x.shape)
         if keep is not None:
             grad *= keep
+        if not math.isfinite(total) or not np.isfinite(grad).all():
+            return stop(f"the loss ({total}) or the gradient is not finite")
         result.losses.append(total / len(views))
         result.seconds.append(time.perf_counter() - t0)
         if callback is not None and callback(it, result.losses[-1], x.reshape(shape)) is False:
             result.cancelled = True
             break
-        opt.step(precond.gradient_u(grad) if precond else grad)
+        u_before = u.copy()
+        try:
+            opt.step(precond.gradient_u(grad) if precond else grad)
+        except ValueError as e:
+            return stop(str(e))
         x_new = precond.from_u(u) if precond else u
         if keep is not None:
             x_new = np.where(keep > 0, x_new, x)
+        moved = float(np.abs(x_new - x).max()) if np.isfinite(x_new).all() else math.inf
+        if moved > MAX_STEP * diagonal:
+            u[...] = u_before
+            return stop(f"a step moved a point by {moved:.3g}, more than {MAX_STEP} of the bounding-box diagonal "
+                        f"{diagonal:.3g} (lower lr)")
+        try:
+            for s in scenes:
+                s.params[name] = x_new.reshape(shape).astype(np.float32)
+                s.update()
+        except ValueError as e:
+            return stop(f"the scene refused the new parameters: {e}")
         x = x_new
-        for s in scenes:
-            s.params[name] = x.reshape(shape).astype(np.float32)
     return result

@@ -101,6 +101,9 @@ class Scene:
         if self.last_stats["invalid_samples"]:
             warnings.warn(f"{self._native.source}: {self.last_stats['invalid_samples']} invalid (NaN/Inf) samples were dropped",
                           stacklevel=2)
+        if self.last_stats["invalid_rays"]:
+            warnings.warn(f"{self._native.source}: {self.last_stats['invalid_rays']} rays could not be traced (non-finite, or "
+                          "coordinates beyond 1.8e18) and missed", stacklevel=2)
         return image
 
     # ---- derivatives --------------------------------------------------------------------------------

@@ -223,6 +223,7 @@ py::tuple render_scene(const SceneHandle& scene, int spp, uint64_t seed, int thr
   s["samples"] = stats.samples;
   s["rays"] = stats.rays;
   s["invalid_samples"] = stats.invalid_samples;
+  s["invalid_rays"] = stats.invalid_rays;
   s["spp"] = spp > 0 ? spp : scene->spp;
   return py::make_tuple(image_to_numpy(std::move(img)), s);
 }

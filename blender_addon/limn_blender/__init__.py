@@ -16,7 +16,7 @@ bl_info = {
 
 import bpy
 
-from . import exporter, optimize_ops, render_ops
+from . import exporter, jobs, optimize_ops, render_ops
 from .exporter import export_scene, write_scene
 from .optimize_ops import optimize
 from .render_ops import render, load_blender_scene
@@ -76,6 +76,11 @@ class LIMN_PT_render(bpy.types.Panel):
         col.prop(s, "max_depth")
         col.prop(s, "image_name")
         col.operator(render_ops.LIMN_OT_render.bl_idname, icon="RENDER_STILL")
+        for job in jobs.running():
+            if isinstance(job, render_ops.RenderJob):
+                row = col.row()
+                row.label(text=f"Rendering into '{job.image_name}': {job.status_text or 'starting'}", icon="TIME")
+                row.operator(optimize_ops.LIMN_OT_stop.bl_idname, icon="CANCEL").job = job.label
         col.operator(render_ops.LIMN_OT_export.bl_idname, icon="EXPORT")
         box = self.layout.box()
         box.label(text="Optimise geometry")
@@ -97,16 +102,67 @@ class LIMN_PT_render(bpy.types.Panel):
         box.prop(s, "iterations")
         box.prop(s, "learning_rate")
         box.prop(s, "large_steps_lambda")
+        running = optimize_ops._running_on(s)
+        if running is not None:
+            row = box.row()
+            row.label(text=f"Running: {running.status_text or 'starting'}", icon="TIME")
+            row.operator(optimize_ops.LIMN_OT_stop.bl_idname, icon="CANCEL").job = running.label
         box.operator(optimize_ops.LIMN_OT_optimize.bl_idname, icon="MOD_SMOOTH")
 
 
 _classes = (LimnPreferences, optimize_ops.LimnTarget, LimnSettings, render_ops.LIMN_OT_render, render_ops.LIMN_OT_export,
-            optimize_ops.LIMN_OT_target_add, optimize_ops.LIMN_OT_optimize, LIMN_PT_render)
+            optimize_ops.LIMN_OT_target_add, optimize_ops.LIMN_OT_optimize, optimize_ops.LIMN_OT_stop, LIMN_PT_render)
+
+
+# ---- what stops the jobs (jobs.py): file load, undo, add-on disable, Python's exit; save writes ------
+@bpy.app.handlers.persistent
+def _limn_load_pre(*_args):
+    """Before any file load (File > New, Open, Revert, a script): the jobs' data is going away.
+    Blender then cancels the modal operators (cancel()), which report; the jobs are forgotten
+    here too, for jobs that scripts started."""
+    jobs.stop_all("a file is being loaded (File > New, Open, Revert or a script)")
+    for job in jobs.running():
+        job.forget()
+
+
+@bpy.app.handlers.persistent
+def _limn_undo_pre(*_args):
+    """Undo / redo replaces the datablocks an optimisation writes into: it stops, writing nothing more."""
+    jobs.stop_all("undo or redo during the run", kinds=(optimize_ops.OptimizeJob,))
+
+
+@bpy.app.handlers.persistent
+def _limn_save_pre(*_args):
+    """Saving during an optimisation saves its latest state: written into the object now (a
+    heightfield image is packed). A render that is still running saves nothing of itself."""
+    for job in jobs.running():
+        if isinstance(job, optimize_ops.OptimizeJob):
+            it = job.write_latest()
+            if it is not None:
+                jobs.log(f"limn: the file is saved with the state of iteration {it + 1} of the {job.label}")
+
+
+_HANDLERS = (("load_pre", _limn_load_pre), ("undo_pre", _limn_undo_pre), ("redo_pre", _limn_undo_pre),
+             ("save_pre", _limn_save_pre))
+
+
+def _remove_handlers():
+    """Removes this add-on's handlers, also those of an earlier load of the module (by name)."""
+    names = {f.__name__ for _, f in _HANDLERS}
+    for event, _ in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, event)
+        for f in list(handlers):
+            if getattr(f, "__name__", "") in names and getattr(f, "__module__", "") == __name__:
+                handlers.remove(f)
 
 
 def register():
     for c in _classes:
         bpy.utils.register_class(c)
+    _remove_handlers()
+    for event, f in _HANDLERS:
+        getattr(bpy.app.handlers, event).append(f)
+    jobs.register()
     bpy.types.Scene.limn = bpy.props.PointerProperty(type=LimnSettings)
     bpy.types.Object.limn_heightfield = bpy.props.BoolProperty(
         name="limn heightfield", default=False,
@@ -115,6 +171,8 @@ def register():
 
 
 def unregister():
+    jobs.unregister()  # stops and waits for every running job first
+    _remove_handlers()
     del bpy.types.Object.limn_heightfield
     del bpy.types.Scene.limn
     for c in reversed(_classes):

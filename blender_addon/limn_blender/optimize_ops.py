@@ -28,23 +28,42 @@ import time
 import bpy
 import numpy as np
 
-from . import exporter, heightfield
-from .render_ops import _limn, end_worker, start_modal
+from . import exporter, heightfield, jobs
+from .render_ops import _limn, end_worker, redraw_panels, start_modal
 
 
 def _target_pixels(target, width: int, height: int, limn) -> np.ndarray:
+    """The target as (H, W, 3) linear floats. Refuses, naming the image, a target without pixels
+    (e.g. a missing file) and a constant one (e.g. a generated image that was not packed and came
+    back black after a save and reopen), which cannot guide the optimisation."""
     if isinstance(target, str):
+        what = f"target image file '{target}'"
         img = limn.read_image(bpy.path.abspath(target))
     else:  # an image datablock (stored bottom row first, RGBA)
+        what = f"target image '{target.name}'"
         w, h = target.size
-        px = np.empty(w * h * 4, dtype=np.float32)
+        if w == 0 or h == 0:
+            where = f" (file '{target.filepath}' missing?)" if target.source == "FILE" and not target.packed_file else ""
+            raise ValueError(f"{what} has no pixels{where}; load or render it again")
+        px = np.empty(w * h * target.channels, dtype=np.float32)
         target.pixels.foreach_get(px)
-        img = px.reshape(h, w, 4)[::-1, :, :3].copy()
+        px = px.reshape(h, w, target.channels)
+        img = (px[::-1, :, :3] if target.channels >= 3 else np.repeat(px[::-1, :, :1], 3, axis=2)).copy()
         if not target.is_float:  # byte images hold sRGB-encoded colours
             img = np.where(img <= 0.04045, img / 12.92, ((img + 0.055) / 1.055) ** 2.4).astype(np.float32)
     if img.shape[:2] != (height, width):
-        raise ValueError(f"target image is {img.shape[1]}x{img.shape[0]}, the render resolution is {width}x{height}")
+        raise ValueError(f"{what} is {img.shape[1]}x{img.shape[0]}, the render resolution is {width}x{height}")
+    if img.size and (img == img[0, 0]).all():
+        c = ", ".join(f"{v:.3g}" for v in img[0, 0])
+        raise ValueError(f"{what} is constant (every pixel is ({c})), so there is nothing to fit; if it was a "
+                         "generated image that was not packed, it came back blank after a save: render or load "
+                         "it again (limn packs its renders into the .blend)")
     return img
+
+
+def _unsaved(image) -> bool:
+    """A generated image that is not packed: its pixels are not saved with the .blend."""
+    return not isinstance(image, str) and image.source == "GENERATED" and image.packed_file is None
 
 
 MODES = ("AUTO", "MESH", "HEIGHTFIELD")
@@ -114,6 +133,9 @@ class Problem:
                              "are for the heightfield mode")
         self.limn = _limn()
         self.obj = obj
+        self.vertex_count = len(obj.data.vertices)
+        self.warnings = [f"target image '{image.name}' is a generated image that is not packed: it is lost when "
+                         "the file is saved (Image > Pack keeps it)" for _, image, _ in targets if _unsaved(image)]
         # Heights and mask first: a non-grid mesh, a bad Displace set-up or mask fails before any export.
         self.source = heightfield.Source(obj) if self.mode == "HEIGHTFIELD" else None
         self.mask = self.source.mask(mask_vertex_group, mask_image) if self.source else None
@@ -141,6 +163,7 @@ class Problem:
             src = self.source
             self.name = f"{obj.name}.heights"
             self.faces = self.limn.optim.grid_faces(src.rows, src.columns)
+            self._refs = self._make_refs()
             return
         self.faces = shape["faces"]
         self.name = f"{obj.name}.vertex_positions"
@@ -150,12 +173,66 @@ class Problem:
             raise ValueError(f"object '{obj.name}': its modifiers change the vertices or it has coincident vertices "
                              f"({n} in the mesh, {len(welded)} rendered); apply or remove them before optimising")
         self.world = np.array([list(row) for row in obj.matrix_world], dtype=np.float64)
+        self._refs = self._make_refs()
+
+    # ---- the datablocks the run writes: still there, still the same? ---------------------------------
+    def _make_refs(self):
+        """(bpy.data collection, name, address, kind) of what write_back writes into."""
+        blocks = [("objects", self.obj, "object"), ("meshes", self.obj.data, "mesh")]
+        if self.source is not None and self.source.kind == "displace":
+            blocks += [("textures", self.source.texture, "texture"), ("images", self.source.image, "image")]
+        return [(coll, b.name, b.as_pointer(), kind) for coll, b, kind in blocks]
+
+    @property
+    def keys(self) -> set:
+        """What a job on this problem holds: no other job may write the same object, mesh or image."""
+        return {(kind, ptr) for _, _, ptr, kind in self._refs}
+
+    def check(self) -> str:
+        """"" when the object (and its mesh, or displacement texture and image) the run writes are
+        still the ones it started with, in a scene and in Object Mode; then the Python references
+        are refreshed from bpy.data. Otherwise why not: deleted, renamed, replaced (undo, file
+        load), in Edit Mode, another mesh or vertex count. Main thread only; never touches a stale
+        reference (a deleted datablock's memory may be freed)."""
+        found = {}
+        for coll, name, ptr, kind in self._refs:
+            blocks = getattr(bpy.data, coll)
+            block = blocks.get(name)
+            if block is None or block.as_pointer() != ptr:
+                renamed = next((b for b in blocks if b.as_pointer() == ptr), None)
+                if renamed is not None:
+                    return f"{kind} '{name}' was renamed to '{renamed.name}'"
+                return f"{kind} '{name}' was deleted" + (" or replaced (undo?)" if block is not None else "")
+            found[kind] = block
+        obj, mesh = found["object"], found["mesh"]
+        name = obj.name
+        if not obj.users_scene:
+            return f"object '{name}' was deleted (it is in no scene any more)"
+        if obj.data is None or obj.data.as_pointer() != mesh.as_pointer():
+            return f"object '{name}' uses another mesh now"
+        if obj.mode == "EDIT" or mesh.is_editmode:
+            return f"object '{name}' entered Edit Mode (its mesh is not written while it is edited)"
+        if (self.source is None or self.source.kind == "grid") and len(mesh.vertices) != self.vertex_count:
+            return f"mesh '{mesh.name}' has {len(mesh.vertices)} vertices now ({self.vertex_count} at the start)"
+        if self.source is not None and self.source.kind == "displace":
+            m = heightfield.displace_modifier(obj)
+            tex = getattr(m, "texture", None)
+            if tex is None or tex.as_pointer() != found["texture"].as_pointer() or tex.image is None \
+                    or tex.image.as_pointer() != found["image"].as_pointer():
+                return f"the Displace modifier of object '{name}' no longer uses texture '{found['texture'].name}' " \
+                       f"with image '{found['image'].name}'"
+            self.source.texture, self.source.image = found["texture"], found["image"]
+        self.obj = obj
+        if self.source is not None:
+            self.source.obj = obj
+        return ""
 
     def write_back(self, x: np.ndarray, final: bool = True) -> None:
         """Stores the parameter's value in Blender: world-space vertices into the mesh, or heights
         into the displacement image (packed when `final`) / the grid's z."""
         if self.source is not None:
             self.source.write_back(x, final=final)
+            self._refs = self._make_refs()  # a new "<name> (limn)" image may have replaced the texture's
             return
         inv = np.linalg.inv(self.world)
         local = x.astype(np.float64) @ inv[:3, :3].T + inv[:3, 3]
@@ -169,6 +246,9 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
     progress(iteration, loss) may return False to stop. Returns {"losses": [...], "seconds": ...,
     "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD"}."""
     problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image)
+    running = jobs.busy(problem.keys)
+    if running is not None:  # a job in the UI writes the same object
+        raise jobs.JobBusy(running)
 
     def callback(it, loss, x):
         return None if progress is None else progress(it, loss)
@@ -181,60 +261,129 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
             "mode": problem.mode}
 
 
-class OptimizeJob:
+class _Cancellable:
+    """A limn.Scene whose render / render_forward / render_backward calls get `keep_going` as their
+    progress callback, so that a cancel stops limn.optim.fit inside an iteration (limn raises
+    RenderCancelled) and not only between iterations. Everything else is the scene's own."""
+
+    def __init__(self, scene, keep_going):
+        self._scene, self._keep_going = scene, keep_going
+
+    def __getattr__(self, name):
+        return getattr(self._scene, name)
+
+    def render(self, *args, **kwargs):
+        return self._scene.render(*args, progress=self._keep_going, **kwargs)
+
+    def render_forward(self, *args, **kwargs):
+        return self._scene.render_forward(*args, progress=self._keep_going, **kwargs)
+
+    def render_backward(self, *args, **kwargs):
+        return self._scene.render_backward(*args, progress=self._keep_going, **kwargs)
+
+
+class OptimizeJob(jobs.Job):
     """The background optimisation behind the modal operator. start() runs limn.optim.fit on a
     worker thread (which never touches bpy); poll(), on the main thread, reports progress and
     writes the latest vertices (or heights) into Blender every `write_every` iterations and when the
-    run ends; cancel() stops after the current iteration, keeping the last state."""
+    run ends; cancel() stops within a tile of the current render, keeping the last state.
+
+    Only one job may write an object (its mesh, its displacement image): start() raises
+    jobs.JobBusy otherwise. Before every write poll() checks that the object is still the one the
+    run started with (Problem.check); if it was deleted, renamed, replaced or put in Edit Mode, the
+    run stops and nothing more is written. A job cancelled with discard=True (file load, undo,
+    quit) writes nothing either."""
 
     def __init__(self, problem: Problem, iterations: int, spp: int, lr: float, lambda_: float, write_every: int = 5):
+        super().__init__(keys=problem.keys)
+        self.label = f"optimisation of '{problem.obj.name}'"
         self.problem, self.iterations, self.write_every = problem, iterations, write_every
         self._settings = (spp, lr, lambda_)
         self._lock = threading.Lock()
-        self._state = {"it": -1, "loss": float("nan"), "x": None, "done": False, "error": None}
-        self._cancel = False
+        self._state = {"it": -1, "loss": float("nan"), "x": None}
         self._written = -1
         self.writes = 0  # how often poll() wrote the result (progress shown in the viewport)
-        self._thread = None
+        self._end = None  # the final poll() result, once the end was handled
 
-    def start(self) -> None:
+    def work(self) -> None:
         spp, lr, lambda_ = self._settings
         state, problem = self._state, self.problem
 
         def callback(it, loss, x):
             with self._lock:
                 state["it"], state["loss"], state["x"] = it, loss, x.copy()
-            return not self._cancel
+            return self.keep_going()
 
-        def work():
-            try:
-                problem.limn.optim.fit(problem.views, problem.name, iterations=self.iterations, spp=spp, lr=lr,
-                                       lambda_=lambda_, faces=problem.faces, mask=problem.mask, callback=callback)
-                with self._lock:
-                    state["x"] = problem.views[0][0].params[problem.name].copy()
-            except Exception as e:  # reported by poll() on the main thread
-                state["error"] = e
-            state["done"] = True
+        views = [(_Cancellable(scene, self.keep_going), target) for scene, target in problem.views]
+        try:
+            problem.limn.optim.fit(views, problem.name, iterations=self.iterations, spp=spp, lr=lr, lambda_=lambda_,
+                                   faces=problem.faces, mask=problem.mask, callback=callback)
+        except problem.limn.RenderCancelled:
+            if not self.cancelled:
+                raise
+            return  # stopped inside an iteration: the last good state is the callback's
+        if not self.cancelled:
+            with self._lock:
+                state["x"] = problem.views[0][0].params[problem.name].copy()
 
-        self._thread = threading.Thread(target=work, daemon=True)
-        self._thread.start()
+    def _write(self, x, it, final) -> str:
+        """Writes x if the object is still valid; returns why not ("" when written)."""
+        why = self.problem.check()
+        if why:
+            return why
+        self.problem.write_back(x, final=final)
+        self._written = it
+        self.writes += 1
+        return ""
 
-    def cancel(self) -> None:
-        self._cancel = True
+    def write_latest(self) -> int | None:
+        """Writes the latest state now, packing a heightfield image (before a save); returns its
+        iteration, or None when nothing was written. Main thread."""
+        with self._lock:
+            it, x = self._state["it"], self._state["x"]
+        if x is None or self.discard or self._end is not None:
+            return None
+        return it if self._write(x, it, final=True) == "" else None
 
     def poll(self) -> dict:
-        """{"status": "running" | "finished" | "cancelled" | "error", "iteration", "loss", "message"}."""
+        """{"status": "running" | "finished" | "cancelled" | "stopped" | "error", "iteration",
+        "loss", "message"}. "stopped": the object went away (or a file load, undo or quit ended
+        the run); nothing was written after that."""
+        if self._end is not None:
+            return self._end
+        done = self._thread is not None and not self._thread.is_alive()
         with self._lock:
-            it, loss, x, done, error = (self._state[k] for k in ("it", "loss", "x", "done", "error"))
+            it, loss, x = self._state["it"], self._state["loss"], self._state["x"]
+        progress = f"iteration {it + 1}/{self.iterations}, loss {loss:.6f}"
+        self.status_text = progress
+        why = "" if self.discard else self.problem.check()
+        if why:  # never write into what the run no longer owns; stop the worker now
+            self.stop(why, timeout=30)
+            done = not self.alive
+        if self.discard and not why:
+            why = self.stop_reason
+        if why:
+            if not done:
+                return {"status": "running", "iteration": it, "loss": loss, "message": f"limn: stopping ({why})"}
+            message = (f"limn: {self.label} stopped: {why}; " +
+                       (f"the state of iteration {self._written + 1} was the last written" if self.writes
+                        else "nothing was written"))
+            return self._finish("stopped", it, loss, message)
         if x is not None and (done or it - self._written >= self.write_every):
-            self.problem.write_back(x, final=done)
-            self._written = it
-            self.writes += 1
-        status = "running" if not done else ("error" if error is not None else ("cancelled" if self._cancel else "finished"))
-        message = (f"limn: {error}" if error is not None else
-                   f"limn: iteration {it + 1}/{self.iterations}, loss {loss:.6f}" +
-                   ("" if done else " (Esc to cancel)") + (", cancelled" if done and self._cancel else ""))
-        return {"status": status, "iteration": it, "loss": loss, "message": message}
+            self._write(x, it, final=done)
+        if not done:
+            return {"status": "running", "iteration": it, "loss": loss, "message": f"limn: {progress} (Esc to cancel)"}
+        if self.error is not None:
+            return self._finish("error", it, loss, f"limn: {self.error}")
+        if self.cancelled:
+            return self._finish("cancelled", it, loss, f"limn: {progress}, cancelled ({self.stop_reason}); "
+                                                       "the last state is kept")
+        return self._finish("finished", it, loss, f"limn: {progress}")
+
+    def _finish(self, status, it, loss, message) -> dict:
+        self._end = {"status": status, "iteration": it, "loss": loss, "message": message}
+        self.forget()
+        return self._end
 
 
 class LimnTarget(bpy.types.PropertyGroup):
@@ -272,6 +421,17 @@ class LIMN_OT_optimize(bpy.types.Operator):
     bl_label = "Optimise with limn"
     bl_options = {"REGISTER", "UNDO"}
 
+    _timer = None
+    _job = None
+
+    @classmethod
+    def description(cls, context, properties):
+        running = _running_on(getattr(context.scene, "limn", None))
+        if running is not None:
+            return (f"limn's {running.label} is running ({running.status_text}); a second one on the same object "
+                    "is refused: press Esc or Stop first")
+        return cls.__doc__
+
     def _inputs(self, context):
         s = context.scene.limn
         targets = [(t.camera, t.image, t.light_collection) for t in s.targets if t.camera is not None and t.image is not None]
@@ -279,6 +439,11 @@ class LIMN_OT_optimize(bpy.types.Operator):
 
     def execute(self, context):
         s, targets = self._inputs(context)
+        running = _running_on(s)
+        if running is not None:
+            self.report({"ERROR"}, f"limn: object '{s.optimize_object.name}' is already being optimised "
+                                   f"({running.status_text or 'starting'}); press Esc or Stop in the limn panel first")
+            return {"CANCELLED"}
         if bpy.app.background or not context.window_manager.windows:
             def report(it, loss):
                 if it % 5 == 0 or it == s.iterations - 1:
@@ -299,28 +464,73 @@ class LIMN_OT_optimize(bpy.types.Operator):
     def _start(self, context, s, targets):
         try:
             problem = Problem(s.optimize_object, targets, s.spp, **_mode_inputs(s))
-        except (ValueError, RuntimeError) as e:
+            self._job = OptimizeJob(problem, s.iterations, s.spp, s.learning_rate, s.large_steps_lambda)
+            self._job.start()
+        except (ValueError, RuntimeError) as e:  # jobs.JobBusy is a ValueError
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self._job = OptimizeJob(problem, s.iterations, s.spp, s.learning_rate, s.large_steps_lambda)
-        self._job.start()
+        for w in problem.warnings:
+            self.report({"WARNING"}, f"limn: {w}")
         return start_modal(self, context, 0.2)
 
     def modal(self, context, event):
         job = self._job
-        if event.type == "ESC":
-            job.cancel()
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel("Esc pressed")
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         status = job.poll()
         context.window_manager.progress_update(int(100 * (status["iteration"] + 1) / job.iterations))
         if context.area:
             context.area.header_text_set(status["message"])
+        redraw_panels(context)
         if status["status"] == "running":
             return {"RUNNING_MODAL"}
         end_worker(self, context)
-        if status["status"] == "error":
+        if status["status"] in ("error", "stopped"):
+            jobs.log(status["message"])
             self.report({"ERROR"}, status["message"])
             return {"CANCELLED"}
         self.report({"INFO"}, status["message"])
+        return {"FINISHED"}  # one undo step, also after Esc (the last state is kept)
+
+    def cancel(self, context):
+        """Blender ends the operator: on quit, file load or closing its window. Stops the worker,
+        waits for it and writes nothing more (the object belongs to a file that is going away)."""
+        job = self._job
+        if job is not None:
+            job.cancel(job.stop_reason or "Blender ended the operator (quit, file load or window closed)", discard=True)
+            job.join()
+            job.forget()
+            job.announce()
+        end_worker(self, context)
+
+
+def _running_on(s):
+    """The running job that writes the object chosen in the panel settings `s`, or None."""
+    obj = getattr(s, "optimize_object", None)
+    if obj is None:
+        return None
+    keys = {("object", obj.as_pointer())}
+    if obj.data is not None:
+        keys.add(("mesh", obj.data.as_pointer()))
+    return jobs.busy(keys)
+
+
+class LIMN_OT_stop(bpy.types.Operator):
+    """Stop limn's running renders and optimisations (an optimisation keeps its last state)"""
+    bl_idname = "limn.stop"
+    bl_label = "Stop"
+
+    job: bpy.props.StringProperty(name="Job", description="Label of the job to stop; empty: all")
+
+    @classmethod
+    def poll(cls, context):
+        return bool(jobs.running())
+
+    def execute(self, context):
+        stopped = [j for j in jobs.running() if not self.job or j.label == self.job]
+        for j in stopped:
+            j.cancel("Stop pressed")
+        self.report({"INFO"}, f"limn: stopping {', '.join(j.label for j in stopped) or 'nothing'}")
         return {"FINISHED"}

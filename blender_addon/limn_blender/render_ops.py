@@ -11,7 +11,7 @@ import time
 import bpy
 import numpy as np
 
-from . import exporter
+from . import exporter, jobs
 from .limn_loader import LimnNotFound, import_limn
 
 
@@ -25,26 +25,57 @@ def _limn(context=None):
 
 
 def start_modal(operator, context, interval: float):
-    """Makes `operator` modal with a timer every `interval` seconds and a progress bar; its modal()
-    polls the work it started on a thread of its own."""
+    """Makes `operator` modal with a timer every `interval` seconds and a progress indicator; its
+    modal() polls the job it started on a thread of its own."""
     wm = context.window_manager
     operator._timer = wm.event_timer_add(interval, window=context.window)
     wm.progress_begin(0, 100)
     wm.modal_handler_add(operator)
+    timer, area = operator._timer, context.area
+    operator._job.release_ui = lambda: _release_ui(wm, timer, area)  # if the add-on is disabled while it runs
     return {"RUNNING_MODAL"}
 
 
+def _release_ui(wm, timer, area) -> None:
+    """What end_worker undoes, for an operator that Blender dropped without calling cancel() (the
+    add-on was disabled while it ran: Blender frees the operator and leaves the rest to us)."""
+    try:
+        wm.event_timer_remove(timer)
+        wm.progress_end()
+        area.header_text_set(None)
+    except (ReferenceError, AttributeError, RuntimeError):
+        pass
+
+
 def end_worker(operator, context) -> None:
-    """Undoes start_modal's timer, progress bar and header text."""
+    """Undoes start_modal's timer, progress indicator and header text (also while Blender quits or
+    loads a file, when parts of the context may be gone)."""
     wm = context.window_manager
-    wm.event_timer_remove(operator._timer)
-    wm.progress_end()
-    if context.area:
-        context.area.header_text_set(None)
+    timer, operator._timer = getattr(operator, "_timer", None), None
+    if operator._job is not None:
+        operator._job.release_ui = None
+    try:
+        if timer is not None:
+            wm.event_timer_remove(timer)
+        wm.progress_end()
+        if context.area:
+            context.area.header_text_set(None)
+    except (ReferenceError, AttributeError, RuntimeError):
+        pass
+    redraw_panels(context)
+
+
+def redraw_panels(context) -> None:
+    """Redraws the Properties editors (the limn panel shows the running jobs)."""
+    screen = getattr(context, "screen", None)
+    for area in (screen.areas if screen is not None else ()):
+        if area.type == "PROPERTIES":
+            area.tag_redraw()
 
 
 def image_to_blender(pixels: np.ndarray, name: str):
-    """Stores a (H, W, 3) linear float image in a float Blender image datablock (created or resized)."""
+    """Stores a (H, W, 3) linear float image in a float Blender image datablock (created or
+    resized) and packs it into the .blend (as OpenEXR), so that saving the file keeps it."""
     h, w = pixels.shape[:2]
     img = bpy.data.images.get(name)
     if img is None or tuple(img.size) != (w, h) or not img.is_float:
@@ -55,6 +86,7 @@ def image_to_blender(pixels: np.ndarray, name: str):
     rgba[..., :3] = pixels[::-1]  # Blender stores rows bottom to top
     img.pixels.foreach_set(rgba.ravel())
     img.update()
+    img.pack()  # a generated image that is not packed comes back black after save and reopen
     return img
 
 
@@ -75,19 +107,41 @@ def render(scene=None, spp: int = 64, seed: int = 0, image_name: str = "limn ren
     return image_to_blender(pixels, image_name)
 
 
+class RenderJob(jobs.Job):
+    """A render on a worker thread; `fraction` is its progress, `result` the image when it ends."""
+
+    def __init__(self, lscene, spp: int, seed: int, image_name: str):
+        super().__init__(keys={("render image", image_name)})
+        self.label = f"render into image '{image_name}'"
+        self.lscene, self.spp, self.seed, self.image_name = lscene, spp, seed, image_name
+        self.fraction = 0.0
+        self.result = None
+
+    def _progress(self, fraction):
+        self.fraction = fraction
+        return self.keep_going()
+
+    def work(self):
+        self.result = self.lscene.render(spp=self.spp, seed=self.seed, progress=self._progress)
+
+
 class LIMN_OT_render(bpy.types.Operator):
     """Render the active camera's view with limn into the image 'limn render'"""
     bl_idname = "limn.render"
     bl_label = "Render with limn"
 
     _timer = None
-    _thread = None
+    _job = None
 
     def _settings(self, context):
         return context.scene.limn
 
     def execute(self, context):
         s = self._settings(context)
+        running = jobs.busy({("render image", s.image_name)})
+        if running is not None:
+            self.report({"ERROR"}, str(jobs.JobBusy(running)))
+            return {"CANCELLED"}
         try:
             lscene, _ = load_blender_scene(context.scene, spp=s.spp, max_depth=s.max_depth or None)
         except (LimnNotFound, ValueError) as e:
@@ -107,47 +161,50 @@ class LIMN_OT_render(bpy.types.Operator):
             self.report({"INFO"}, f"limn: rendered {pixels.shape[1]}x{pixels.shape[0]} at {s.spp} spp in "
                                   f"{time.perf_counter() - t0:.2f} s into image '{s.image_name}'")
             return {"FINISHED"}
-        return self._start_worker(context, lscene, s)
+        self._job = RenderJob(lscene, s.spp, s.seed, s.image_name)
+        self._job.start()
+        return start_modal(self, context, 0.1)
 
     def invoke(self, context, event):
         return self.execute(context)
 
-    def _start_worker(self, context, lscene, s):
-        self._state = {"fraction": 0.0, "cancel": False, "result": None, "error": None}
-        state = self._state
-
-        def progress(fraction):
-            state["fraction"] = fraction
-            return not state["cancel"]
-
-        def work():
-            try:
-                state["result"] = lscene.render(spp=s.spp, seed=s.seed, progress=progress)
-            except Exception as e:  # reported on the main thread
-                state["error"] = e
-
-        self._thread = threading.Thread(target=work, daemon=True)  # never touches bpy
-        self._thread.start()
-        return start_modal(self, context, 0.1)
-
     def modal(self, context, event):
-        if event.type == "ESC":
-            self._state["cancel"] = True
+        job = self._job
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel("Esc pressed")
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        wm = context.window_manager
-        wm.progress_update(int(100 * self._state["fraction"]))
+        percent = 100 * job.fraction
+        job.status_text = f"{percent:.0f}%"
+        context.window_manager.progress_update(int(percent))
         if context.area:
-            context.area.header_text_set(f"limn: {100 * self._state['fraction']:.0f}% (Esc to cancel)")
-        if self._thread.is_alive():
+            context.area.header_text_set(f"limn: rendering {percent:.0f}% (Esc to cancel)")
+        redraw_panels(context)
+        if job.alive:
             return {"RUNNING_MODAL"}
+        job.forget()
         end_worker(self, context)
-        if self._state["error"] is not None:
-            self.report({"WARNING" if self._state["cancel"] else "ERROR"}, f"limn: {self._state['error']}")
+        if job.cancelled:  # also when the render ended just as it was cancelled: not written then
+            message = f"limn: {job.label} stopped: {job.stop_reason}"
+            jobs.log(message)
+            self.report({"WARNING"}, message)
             return {"CANCELLED"}
-        image_to_blender(self._state["result"], self._settings(context).image_name)
-        self.report({"INFO"}, f"limn: render finished into image '{self._settings(context).image_name}'")
+        if job.error is not None:
+            self.report({"ERROR"}, f"limn: {job.error}")
+            return {"CANCELLED"}
+        image_to_blender(job.result, job.image_name)
+        self.report({"INFO"}, f"limn: render finished into image '{job.image_name}' (packed into the .blend)")
         return {"FINISHED"}
+
+    def cancel(self, context):
+        """Blender ends the operator: on quit, file load or closing its window. Stops the worker
+        and waits for it; the image is left as it was."""
+        job = self._job
+        if job is not None:
+            job.stop(job.stop_reason or "Blender ended the operator (quit, file load or window closed)")
+            job.forget()
+            job.announce()
+        end_worker(self, context)
 
 
 class LIMN_OT_export(bpy.types.Operator):

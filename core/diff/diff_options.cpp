@@ -4,6 +4,7 @@
 #include <stdexcept>
 #include "core/diff/terms/seeding.h"
 #include "core/guiding/grid.h"
+#include "core/render/integrators/render.h"
 
 namespace limn {
 namespace {
@@ -29,7 +30,7 @@ void validate_diff_options(const Scene& scene, const DiffParams& params, const D
   require(opt.spp_interior >= -1, scene, "spp_interior", ">= 0 (-1: spp)", opt.spp_interior);
   require(opt.spp_primary >= -1, scene, "spp_primary", ">= 0 (-1: spp)", opt.spp_primary);
   require(opt.spp_boundary >= -1, scene, "spp_boundary", ">= 0 (-1: spp)", opt.spp_boundary);
-  require(opt.threads >= 0, scene, "threads", ">= 0 (0: all cores)", opt.threads);
+  require(in(opt.threads, 0, kMaxThreads), scene, "threads", "in [0, " + std::to_string(kMaxThreads) + "] (0: all cores)", opt.threads);
   // Indirect boundary term: sampling and guides.
   require(opt.boundary_sampler == "independent" || opt.boundary_sampler == "stratified", scene, "boundary_sampler",
           "'independent' or 'stratified'", opt.boundary_sampler);

@@ -242,8 +242,10 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
 
 }  // namespace
 
-Image render_forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent,
-                     const DiffOptions& options, DiffStats* stats) {
+namespace {
+
+Image forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent, const DiffOptions& options,
+              DiffStats* stats) {
   validate_diff_options(scene, params, options);
   const DiffOptions opt = with_sample_counts(scene, options);
   if (tangent.size() != params.slot_count())
@@ -313,8 +315,8 @@ Image render_forward(const Scene& scene, const DiffParams& params, const std::ve
   return img;
 }
 
-std::vector<double> render_backward(const Scene& scene, const DiffParams& params, const Image& adjoint,
-                                    const DiffOptions& options, DiffStats* stats) {
+std::vector<double> backward(const Scene& scene, const DiffParams& params, const Image& adjoint, const DiffOptions& options,
+                             DiffStats* stats) {
   validate_diff_options(scene, params, options);
   const DiffOptions opt = with_sample_counts(scene, options);
   const int W = scene.camera.width, H = scene.camera.height;
@@ -387,6 +389,63 @@ std::vector<double> render_backward(const Scene& scene, const DiffParams& params
   std::vector<double> total = grads.reduce();
   fill_stats(stats, start, uint64_t(W) * H * spp, rays, invalid, summarize(scene, params, spp, opt, terms.primary.get(), terms.indirect.get(), &terms));
   return total;
+}
+
+std::string format_number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.6g", v);
+  return buf;
+}
+
+// The largest |value| of each parameter's slots, e.g. "'box.vertex_positions' up to 1e+38".
+std::string largest_per_parameter(const DiffParams& params, const std::vector<double>& values) {
+  std::string out;
+  for (const DiffParam& p : params.params()) {
+    double m = 0.0;
+    for (size_t i = 0; i < p.size; ++i) m = std::max(m, std::abs(values[p.offset + i]));
+    out += (out.empty() ? "'" : ", '") + p.name + "' up to " + format_number(m);
+  }
+  return out;
+}
+
+void note_invalid_rays(DiffStats* stats, uint64_t n) {
+  if (stats && n > 0)
+    stats->summary.push_back("warning: " + std::to_string(n) +
+                             " rays could not be traced (non-finite, or coordinates beyond 1.8e18) and missed");
+}
+
+}  // namespace
+
+// A finite input gives a finite output or an error (docs/scene-format.md, "Non-finite values"):
+// samples that are not finite are dropped inside the loops; a sum that overflows is refused here.
+Image render_forward(const Scene& scene, const DiffParams& params, const std::vector<double>& tangent, const DiffOptions& options,
+                     DiffStats* stats) {
+  for (double t : tangent)
+    if (!std::isfinite(t)) throw std::invalid_argument(scene.source + ": the tangent has non-finite values");
+  const uint64_t invalid_rays = scene.invalid_rays();
+  Image img = forward(scene, params, tangent, options, stats);
+  size_t bad = 0;
+  for (float v : img.rgb) bad += !std::isfinite(v);
+  if (bad)
+    throw std::invalid_argument(scene.source + ": the derivative image overflowed in " + std::to_string(bad) +
+                                " values; the tangent reaches " + largest_per_parameter(params, tangent) + ": scale it down");
+  note_invalid_rays(stats, scene.invalid_rays() - invalid_rays);
+  return img;
+}
+
+std::vector<double> render_backward(const Scene& scene, const DiffParams& params, const Image& adjoint, const DiffOptions& options,
+                                    DiffStats* stats) {
+  const uint64_t invalid_rays = scene.invalid_rays();
+  std::vector<double> grad = backward(scene, params, adjoint, options, stats);
+  float largest = 0.0f;
+  for (float a : adjoint.rgb) largest = std::max(largest, std::abs(a));
+  for (const DiffParam& p : params.params())
+    for (size_t i = 0; i < p.size; ++i)
+      if (!std::isfinite(float(grad[p.offset + i])))  // float: what reaches Python
+        throw std::invalid_argument(scene.source + ": the gradient of '" + p.name + "' overflowed (entry " + std::to_string(i) +
+                                    "); the adjoint reaches " + format_number(largest) + ": scale it down");
+  note_invalid_rays(stats, scene.invalid_rays() - invalid_rays);
+  return grad;
 }
 
 }  // namespace limn

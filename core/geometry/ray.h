@@ -4,6 +4,10 @@
 
 namespace limn {
 
+// The largest coordinate limn accepts for geometry and cameras: Embree traces rays whose origin
+// and direction components are within FLT_LARGE (1.844e18); a ray leaving a surface starts there.
+inline constexpr float kMaxCoordinate = 1e18f;
+
 struct Ray {
   Vec3 o, d;            // origin, unit direction
   float tmin = 0.0f;    // parametric interval [tmin, tmax]

@@ -96,7 +96,18 @@ void Accel::commit() {
   EmbreeDevice::check("committing the acceleration structure");
 }
 
+bool Accel::traceable(const Ray& ray) const {
+  // Embree's RayK::valid(): |org|, |dir| <= FLT_LARGE per component (comparisons fail for NaN),
+  // tnear and tfar not NaN.
+  constexpr float kLarge = 1.844e18f;
+  bool ok = !std::isnan(ray.tmin) && !std::isnan(ray.tmax);
+  for (int a = 0; a < 3; ++a) ok = ok && std::abs(ray.o[a]) <= kLarge && std::abs(ray.d[a]) <= kLarge;
+  if (!ok) m_invalid_rays.fetch_add(1, std::memory_order_relaxed);
+  return ok;
+}
+
 bool Accel::intersect(const Ray& ray, SurfaceInteraction& si) const {
+  if (!traceable(ray)) return false;
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRayHit rh;
@@ -120,6 +131,7 @@ bool Accel::intersect(const Ray& ray, SurfaceInteraction& si) const {
 }
 
 bool Accel::occluded(const Ray& ray) const {
+  if (!traceable(ray)) return false;
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRay r;

@@ -3,6 +3,7 @@
 // move), spheres and heightfields as user geometry with their own intersectors.
 #pragma once
 #include <embree3/rtcore.h>
+#include <atomic>
 #include <memory>
 #include <string>
 #include <vector>
@@ -32,10 +33,15 @@ class Accel {
   void shape_changed(int i);
   void commit();
 
+  // Rays Embree cannot trace (a NaN, or an origin or direction component beyond FLT_LARGE) miss and
+  // are counted: Embree asserts on them in debug builds and traverses garbage otherwise.
   bool intersect(const Ray& ray, SurfaceInteraction& si) const;
   bool occluded(const Ray& ray) const;
+  uint64_t invalid_rays() const { return m_invalid_rays.load(std::memory_order_relaxed); }
 
  private:
+  bool traceable(const Ray& ray) const;
+  mutable std::atomic<uint64_t> m_invalid_rays{0};
   std::vector<Shape>& m_shapes;
   RTCScene m_scene = nullptr;
   std::vector<RTCGeometry> m_geoms;

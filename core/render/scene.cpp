@@ -91,6 +91,19 @@ void Scene::validate_parameter(const Parameter& p) const {
   }
 }
 
+void Scene::validate_translation(size_t i) const {
+  // The shape moves by the change of its translation: its bounds must stay finite.
+  const Parameter& p = m_params[i];
+  const Vec3 delta = Vec3(p.data[0], p.data[1], p.data[2]) - Vec3(m_snapshots[i][0], m_snapshots[i][1], m_snapshots[i][2]);
+  Vec3 lo, hi;
+  shapes[p.index].visit([&](const auto& g) { g.bounds(lo, hi); });
+  const Vec3 reach = glm::max(glm::abs(lo + delta), glm::abs(hi + delta));
+  if (lo.x <= hi.x && !(is_finite(reach) && max_component(reach) <= kMaxCoordinate))
+    throw std::invalid_argument(source + ": parameter '" + p.name + "': moves shape '" + shapes[p.index].id + "' (bounds " +
+                                format_values(&lo.x, 3) + " to " + format_values(&hi.x, 3) + ") by " + format_values(&delta.x, 3) +
+                                ", beyond the traceable range (|coordinate| <= 1e18)");
+}
+
 void Scene::apply_parameter(const Parameter& p) {
   // Translation is applied in update(), which knows the previous value; materials and emitters
   // are read directly by the renderer and have nothing derived.
@@ -112,6 +125,7 @@ std::vector<std::string> Scene::update() {
   for (size_t i : changed) {
     try {
       validate_parameter(m_params[i]);
+      if (m_params[i].kind == Parameter::Kind::Translation) validate_translation(i);
     } catch (...) {
       for (size_t j : changed) std::memcpy(m_params[j].data, m_snapshots[j].data(), m_snapshots[j].size() * sizeof(float));
       throw;

@@ -42,6 +42,8 @@ class Scene {
   void build();
   bool intersect(const Ray& ray, SurfaceInteraction& si) const { return m_accel->intersect(ray, si); }
   bool occluded(const Ray& ray) const { return m_accel->occluded(ray); }
+  // Rays so far that could not be traced (non-finite, or beyond Embree's range) and missed.
+  uint64_t invalid_rays() const { return m_accel->invalid_rays(); }
 
   // Editable parameters, their values as of the last update().
   std::vector<Parameter>& parameters() { return m_params; }
@@ -61,6 +63,7 @@ class Scene {
  private:
   void collect_parameters();
   void validate_parameter(const Parameter& p) const;
+  void validate_translation(size_t i) const;  // of m_params[i], a shape's translation
   void apply_parameter(const Parameter& p);
   std::unique_ptr<Accel> m_accel;
   mutable std::shared_mutex m_mutex;

@@ -21,4 +21,6 @@ elif sys.argv and sys.argv[0].endswith("run.py"):  # plain Python with the bpy m
     args = sys.argv[1:]
 else:  # inside the blender executable, without extra arguments
     args = []
-sys.exit(pytest.main([HERE, "-q", "-p", "no:cacheprovider", "--rootdir", HERE, *args]))
+# tests/blender/window starts Blender in a window itself (run from a plain Python: ./test.sh).
+sys.exit(pytest.main([HERE, "-q", "-p", "no:cacheprovider", "--rootdir", HERE, "--ignore", os.path.join(HERE, "window"),
+                      *args]))

@@ -17,8 +17,11 @@ def _principled(name, colour, roughness=0.5, metallic=0.0):
     return mat
 
 
-def build_sphere_over_plane(width=64, height=48):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+def build_sphere_over_plane(width=64, height=48, reset=True):
+    """reset=False builds into the current (empty) file, e.g. in a window after the caller's own
+    read_factory_settings (which leaves a timer's context without a window)."""
+    if reset:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = width, height
     scene.render.resolution_percentage = 100

@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import math
-import time
 import os
+import re
+import time
 
 import bpy  # first: with the bpy module, addon_utils becomes importable only after bpy
 import addon_utils
@@ -156,11 +157,11 @@ def _render_target(addon, limn, camera):
     return limn.load_dict(desc).render(spp=64, seed=5)
 
 
-def test_optimisation_moves_the_mesh_towards_the_target(addon, limn):
-    """Targets rendered from a larger ball; starting from the original ball, the loss must fall
-    and the vertices move outwards. The result is written into the mesh."""
+def _ball_targets(addon, limn, width=32, height=24):
+    """width x height targets from two cameras of the ball grown 1.25 times (flat shading); the
+    ball is left as it was. Returns (ball, [(camera, image)], original vertices)."""
     scene = bpy.context.scene
-    scene.render.resolution_x, scene.render.resolution_y = 32, 24
+    scene.render.resolution_x, scene.render.resolution_y = width, height
     ball = bpy.data.objects["ball"]
     bpy.ops.object.shade_flat()  # smooth shading has a silhouette term limn does not sample yet
     cam2_data = bpy.data.cameras.new("cam2")
@@ -174,15 +175,24 @@ def test_optimisation_moves_the_mesh_towards_the_target(addon, limn):
     ball.data.vertices.foreach_set("co", original * 1.25)
     ball.data.update()
     targets = [(c, _render_target(addon, limn, c)) for c in cams]
+    scene.camera = cams[0]
     ball.data.vertices.foreach_set("co", original)
     ball.data.update()
     target_images = []
     for i, (c, img) in enumerate(targets):
-        im = bpy.data.images.new(f"target{i}", 32, 24, float_buffer=True)
-        rgba = np.ones((24, 32, 4), np.float32)
+        im = bpy.data.images.new(f"target{i}", width, height, float_buffer=True)
+        rgba = np.ones((height, width, 4), np.float32)
         rgba[..., :3] = img[::-1]
         im.pixels.foreach_set(rgba.ravel())
         target_images.append((c, im))
+    return ball, target_images, original
+
+
+def test_optimisation_moves_the_mesh_towards_the_target(addon, limn):
+    """Targets rendered from a larger ball; starting from the original ball, the loss must fall
+    and the vertices move outwards. The result is written into the mesh."""
+    scene = bpy.context.scene
+    ball, target_images, original = _ball_targets(addon, limn)
     out = addon.optimize(ball, target_images, iterations=25, spp=8, lr=0.03, lambda_=5.0)
     print(f"blender optimisation: loss {out['losses'][0]:.5f} -> {min(out['losses'][-5:]):.5f} in {out['seconds']:.1f} s")
     after = np.empty_like(original)
@@ -244,6 +254,244 @@ def test_optimise_operator_reports_bad_input(addon):
     s.optimize_object = bpy.data.objects["ball"]
     with pytest.raises(RuntimeError, match="at least one"):
         bpy.ops.limn.optimize()
+
+
+# ---- robustness: jobs, saved images, refused targets ------------------------------------------------
+def _vertices(obj_or_mesh):
+    mesh = getattr(obj_or_mesh, "data", obj_or_mesh)
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    return co
+
+
+def _run_until(job, iteration, timeout=60.0):
+    """Polls `job` (as the modal operator's timer does) until it reached `iteration` or ended."""
+    t0 = time.perf_counter()
+    while (status := job.poll())["status"] == "running" and status["iteration"] < iteration:
+        assert time.perf_counter() - t0 < timeout, status
+        time.sleep(0.02)
+    return status
+
+
+def _poll_to_end(job, timeout=60.0):
+    t0 = time.perf_counter()
+    while (status := job.poll())["status"] == "running":
+        assert time.perf_counter() - t0 < timeout, status
+        time.sleep(0.02)
+    return status
+
+
+def test_render_is_packed_and_survives_save_and_reopen(addon, tmp_path):
+    """A limn render is packed into the .blend (OpenEXR, full float): after save and reopen it
+    has the same pixels, so it still works as an optimisation target."""
+    img = addon.render(spp=4, image_name="limn target")
+    assert img.packed_file is not None
+    saved = np.empty(64 * 48 * 4, np.float32)
+    img.pixels.foreach_get(saved)
+    s = bpy.context.scene.limn
+    t = s.targets.add()
+    t.camera, t.image = bpy.data.objects["camera"], img
+    path = str(tmp_path / "saved.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    img = bpy.data.images["limn target"]
+    assert bpy.context.scene.limn.targets[0].image == img and tuple(img.size) == (64, 48)
+    after = np.empty_like(saved)
+    img.pixels.foreach_get(after)
+    np.testing.assert_array_equal(after, saved)
+
+
+def test_blank_targets_are_refused(addon, limn):
+    """A target without pixels or with one colour everywhere (what an unpacked generated image is
+    after a reopen) is refused, naming the image; an unpacked generated target draws a warning."""
+    ball, targets, _ = _ball_targets(addon, limn)
+    cam = targets[0][0]
+    black = bpy.data.images.new("black", 32, 24, float_buffer=True)
+    with pytest.raises(ValueError, match=r"target image 'black' is constant \(every pixel is \(0, 0, 0\)\)"):
+        addon.optimize(ball, [targets[1], (cam, black)], iterations=1)
+    missing = bpy.data.images.new("missing", 32, 24)
+    missing.source, missing.filepath = "FILE", str(addon.__file__) + ".nothing.png"
+    missing.reload()
+    with pytest.raises(ValueError, match=r"target image 'missing' has no pixels \(file '.*nothing.png' missing\?\)"):
+        addon.optimize(ball, [(cam, missing)], iterations=1)
+    s = bpy.context.scene.limn
+    s.optimize_object = ball
+    t = s.targets.add()
+    t.camera, t.image = cam, black
+    with pytest.raises(RuntimeError, match=r"target image 'black' is constant"):
+        bpy.ops.limn.optimize()
+    problem = addon.optimize_ops.Problem(ball, targets, 4)
+    assert any("target image 'target0' is a generated image that is not packed" in w for w in problem.warnings)
+    targets[0][1].pack()
+    targets[1][1].pack()
+    assert addon.optimize_ops.Problem(ball, targets, 4).warnings == []
+
+
+def test_one_job_per_object(addon, limn):
+    """A second job on the same object (or its mesh) is refused, by OptimizeJob.start and by the
+    operator, with the running job's progress in the message; the object is free again after."""
+    ball, targets, _ = _ball_targets(addon, limn)
+    Job, Problem = addon.optimize_ops.OptimizeJob, addon.optimize_ops.Problem
+    job = Job(Problem(ball, targets, 4), iterations=500, spp=4, lr=0.03, lambda_=5.0)
+    job.start()
+    _run_until(job, 1)
+    with pytest.raises(addon.jobs.JobBusy, match=r"limn: optimisation of 'ball' is running \(iteration \d+/500"):
+        Job(Problem(ball, targets, 4), iterations=5, spp=4, lr=0.03, lambda_=5.0).start()
+    s = bpy.context.scene.limn
+    s.optimize_object = ball
+    for c, im in targets:
+        t = s.targets.add()
+        t.camera, t.image = c, im
+    with pytest.raises(RuntimeError, match=r"object 'ball' is already being optimised \(iteration \d+/500"):
+        bpy.ops.limn.optimize()
+    job.cancel("test")
+    assert _poll_to_end(job)["status"] == "cancelled"
+    assert addon.jobs.busy(job.keys) is None
+    s.iterations, s.spp = 1, 4
+    assert bpy.ops.limn.optimize() == {"FINISHED"}
+
+
+@pytest.mark.parametrize("how", ["remove", "unlink", "rename", "edit_mode"])
+def test_job_stops_when_its_object_goes(addon, limn, how):
+    """Deleted (freed, or only unlinked from the scene: an orphan), renamed or in Edit Mode: the
+    job stops promptly with a message naming the object and writes nothing into it any more."""
+    ball, targets, _ = _ball_targets(addon, limn)
+    job = addon.optimize_ops.OptimizeJob(addon.optimize_ops.Problem(ball, targets, 4), iterations=500, spp=4,
+                                         lr=0.03, lambda_=5.0, write_every=1)
+    job.start()
+    _run_until(job, 3)
+    mesh = ball.data
+    if how == "remove":
+        bpy.data.objects.remove(ball)
+        expected = "object 'ball' was deleted"
+    elif how == "unlink":
+        for c in ball.users_collection:
+            c.objects.unlink(ball)
+        expected = r"object 'ball' was deleted \(it is in no scene any more\)"
+    elif how == "rename":
+        ball.name = "renamed"
+        expected = "object 'ball' was renamed to 'renamed'"
+    else:
+        bpy.context.view_layer.objects.active = ball
+        bpy.ops.object.mode_set(mode="EDIT")
+        expected = "object 'ball' entered Edit Mode"
+    before = _vertices(mesh)
+    t0 = time.perf_counter()
+    status = _poll_to_end(job)
+    seconds = time.perf_counter() - t0
+    assert status["status"] == "stopped" and not job.alive, status
+    assert re.search(f"limn: optimisation of 'ball' stopped: {expected}", status["message"]), status["message"]
+    assert seconds < 5.0, seconds
+    if how == "edit_mode":
+        bpy.ops.object.mode_set(mode="OBJECT")
+    np.testing.assert_array_equal(_vertices(mesh), before)   # nothing written after
+    assert addon.jobs.running() == []
+
+
+def test_cancel_stops_inside_an_iteration(addon, limn):
+    """The C++ calls get the job's cancel flag as progress callback: a cancel during a long render
+    stops within a 16 x 16 tile, not at the end of the iteration (48 tiles of 256 pixels at
+    2000 spp: a render takes several seconds, a tile a fraction of one)."""
+    ball, targets, _ = _ball_targets(addon, limn, 128, 96)
+    job = addon.optimize_ops.OptimizeJob(addon.optimize_ops.Problem(ball, targets, 4), iterations=3, spp=2000,
+                                         lr=0.03, lambda_=5.0)
+    job.start()
+    time.sleep(0.5)
+    seconds = job.stop("test")
+    print(f"cancel inside an iteration at 128 x 96, 2000 spp: stopped in {seconds:.3f} s")
+    assert not job.alive and seconds < 1.5, seconds
+    status = _poll_to_end(job)
+    assert status["status"] == "cancelled" and status["iteration"] == -1, status
+    assert job.error is None
+
+
+def test_file_load_and_disabling_the_addon_stop_jobs(addon, limn):
+    """load_pre (File > New / Open, scripts) and unregister stop and join the running jobs."""
+    import addon_utils
+    ball, targets, _ = _ball_targets(addon, limn)
+    for stopper in ("load", "disable"):
+        job = addon.optimize_ops.OptimizeJob(addon.optimize_ops.Problem(ball, targets, 4), iterations=500, spp=4,
+                                             lr=0.03, lambda_=5.0)
+        job.start()
+        _run_until(job, 1)
+        t0 = time.perf_counter()
+        if stopper == "load":
+            bpy.ops.wm.read_homefile(use_empty=True)
+        else:
+            addon_utils.disable("limn_blender")
+        seconds = time.perf_counter() - t0
+        print(f"{stopper}: the job stopped within {seconds:.3f} s")
+        assert not job.alive and job.discard and addon.jobs.busy(job.keys) is None
+        assert "file is being loaded" in job.stop_reason if stopper == "load" else "disabled" in job.stop_reason
+        assert seconds < 5.0
+        if stopper == "load":
+            scene_builder.build_sphere_over_plane()
+            addon_utils.enable("limn_blender", default_set=True)
+            ball, targets, _ = _ball_targets(addon, limn)
+    addon_utils.enable("limn_blender", default_set=True)
+
+
+def test_save_during_a_run_saves_the_latest_state(addon, limn, tmp_path):
+    """save_pre writes the job's latest state into the mesh before the file is written."""
+    ball, targets, original = _ball_targets(addon, limn)
+    job = addon.optimize_ops.OptimizeJob(addon.optimize_ops.Problem(ball, targets, 4), iterations=500, spp=4,
+                                         lr=0.03, lambda_=5.0, write_every=1000)
+    job.start()
+    _run_until(job, 3)                            # polled, but not written (write_every)
+    np.testing.assert_array_equal(_vertices(ball), original)
+    path = str(tmp_path / "running.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    saved = _vertices(ball)
+    assert not np.array_equal(saved, original)
+    job.cancel("test")
+    _poll_to_end(job)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    np.testing.assert_array_equal(_vertices(bpy.data.objects["ball"]), saved)
+
+
+_EXIT_SCRIPT = """
+import os, sys, time
+sys.path[:0] = [{tests!r}, {addon_dir!r}]
+import bpy, addon_utils, numpy as np, scene_builder
+scene_builder.build_sphere_over_plane(160, 120)  # 80 tiles: a render of many short tiles
+addon_utils.enable("limn_blender", default_set=True)
+from limn_blender import export_scene, optimize_ops, render_ops
+desc, _ = export_scene(spp=4)
+img = bpy.data.images.new("t", 160, 120, float_buffer=True)
+rgba = np.ones((120, 160, 4), np.float32)
+rgba[..., :3] = 0.5 * render_ops._limn().load_dict(desc).render(spp=4)[::-1]
+img.pixels.foreach_set(rgba.ravel())
+problem = optimize_ops.Problem(bpy.data.objects["ball"], [(bpy.data.objects["camera"], img)], 4)
+optimize_ops.OptimizeJob(problem, 100000, 4, 0.01, 5.0).start()
+render_ops.RenderJob(render_ops.load_blender_scene(spp=4)[0], 2000, 0, "r").start()
+time.sleep(1.0)
+print("script ends with two jobs running", flush=True)
+"""
+
+
+def test_exit_with_jobs_running(addon, tmp_path):
+    """A script that ends while jobs run: Blender 3.4 (-b) quits, the bpy module's Python exits.
+    The jobs are stopped and joined before Python is finalised (unregister via addon_utils.
+    disable_all in Blender, atexit in the module): exit code 0, no abort ("terminate called",
+    "FATAL: exception not rethrown") or segmentation fault."""
+    import subprocess
+    import sys
+    script = tmp_path / "exit_with_jobs.py"
+    script.write_text(_EXIT_SCRIPT.format(tests=os.path.dirname(os.path.abspath(__file__)),
+                                          addon_dir=os.path.dirname(os.path.dirname(addon.__file__))))
+    if bpy.app.binary_path:  # inside the blender executable
+        cmd = [bpy.app.binary_path, "-b", "--factory-startup", "-noaudio", "--python-exit-code", "1",
+               "--python", str(script)]
+    else:                    # the bpy module
+        cmd = [sys.executable, str(script)]
+    p = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=120)
+    print(p.stdout[-1500:])
+    assert "script ends with two jobs running" in p.stdout
+    assert p.returncode == 0, p.stdout[-1500:]
+    assert not re.search(r"FATAL|terminate called|Segmentation fault|Aborted", p.stdout)
+    assert "limn: optimisation of 'ball' stopped" in p.stdout and "limn: render into image 'r' stopped" in p.stdout
+    seconds = float(re.search(r"limn: stopped 2 job\(s\) in ([0-9.]+) s", p.stdout).group(1))
+    assert seconds < 3.0, seconds   # within a tile of the running renders
 
 
 # ---- heightfields --------------------------------------------------------------------------------
@@ -552,7 +800,7 @@ def test_light_setup_exports_only_its_lights(addon):
     assert desc["fill"]["type"] == "point"
     # Problem exports each target with its own light set-up (a pair keeps all lights).
     cam = bpy.data.objects["camera"]
-    img = bpy.data.images.new("t", 64, 48, float_buffer=True)
+    img = _float_image("t", np.random.default_rng(0).random((48, 64, 3), dtype=np.float32))  # not constant
     seen = []
     real = addon.exporter.export_scene
 

@@ -211,21 +211,40 @@ void Mesh::list_parameters(const std::string& id, int index, std::vector<Paramet
 }
 
 void Mesh::validate_parameter(const Parameter& p, const std::string& where) const {
-  for (size_t i = 0; i < p.size(); i += 3)
+  for (size_t i = 0; i < p.size(); i += 3) {
     if (!std::isfinite(p.data[i]) || !std::isfinite(p.data[i + 1]) || !std::isfinite(p.data[i + 2]))
       throw std::invalid_argument(where + ": vertex " + std::to_string(i / 3) + " is not finite (" + format_values(p.data + i, 3) + ")");
+    if (max_component(glm::abs(Vec3(p.data[i], p.data[i + 1], p.data[i + 2]))) > kMaxCoordinate)
+      throw std::invalid_argument(where + ": vertex " + std::to_string(i / 3) + " (" + format_values(p.data + i, 3) +
+                                  ") is beyond the traceable range (|coordinate| <= 1e18)");
+  }
+  // As loading refuses them: p.data are this mesh's positions, edited in place.
+  for (size_t f = 0; f < triangle_count(); ++f)
+    if (degenerate(f))
+      throw std::invalid_argument(where + ": triangle " + std::to_string(f) + " is degenerate (vertices " +
+                                  std::to_string(indices[3 * f]) + ", " + std::to_string(indices[3 * f + 1]) + ", " +
+                                  std::to_string(indices[3 * f + 2]) + " enclose zero area)");
 }
 
 void Mesh::translate(const Vec3& delta) {
   for (size_t k = 0; k < positions.size(); ++k) positions[k] += delta[int(k % 3)];
 }
 
-void Mesh::geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const {
-  values.insert(values.end(), positions.begin(), positions.end());
+void Mesh::bounds(Vec3& lo, Vec3& hi) const {
+  lo = Vec3(kInfinity);
+  hi = Vec3(-kInfinity);
   for (size_t v = 0; v < vertex_count(); ++v) {
     lo = glm::min(lo, vertex(uint32_t(v)));
     hi = glm::max(hi, vertex(uint32_t(v)));
   }
+}
+
+void Mesh::geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const {
+  values.insert(values.end(), positions.begin(), positions.end());
+  Vec3 l, h;
+  bounds(l, h);
+  lo = glm::min(lo, l);
+  hi = glm::max(hi, h);
 }
 
 std::vector<uint32_t> weld_by_position(const std::vector<float>& positions, const std::vector<uint32_t>& indices,

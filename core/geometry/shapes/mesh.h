@@ -65,6 +65,15 @@ struct Mesh {
     return glm::normalize(glm::cross(Vec3d(p1 - p0), Vec3d(p2 - p0)));
   }
 
+  // Whether triangle f encloses no area (repeated corners, or corners on a line); computed in
+  // double so that coordinates near the float range (1e38) neither overflow nor cancel.
+  bool degenerate(size_t f) const {
+    const uint32_t a = indices[3 * f], b = indices[3 * f + 1], c = indices[3 * f + 2];
+    if (a == b || b == c || a == c) return true;
+    const Vec3d pa(vertex(a)), n = glm::cross(Vec3d(vertex(b)) - pa, Vec3d(vertex(c)) - pa);
+    return !(glm::dot(n, n) > 0.0);
+  }
+
   // face_normal turned by `orientation`: agrees with the neighbours' across every manifold edge.
   Vec3d oriented_normal(int f) const { return double(orientation[size_t(f)]) * face_normal(f); }
 
@@ -97,6 +106,8 @@ struct Mesh {
   void validate_parameter(const Parameter& p, const std::string& where) const;
   void apply_parameter(const Parameter& p) { update_derived(); }
   void translate(const Vec3& delta);
+  // World-space bounding box (empty: lo > hi).
+  void bounds(Vec3& lo, Vec3& hi) const;
   // Values whose change means the surface moved, and their bounding box (guide reuse).
   void geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const;
 };

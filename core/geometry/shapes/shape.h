@@ -39,6 +39,7 @@ concept ShapeKind = requires(G& g, const G& cg, RTCDevice device, RTCGeometry ge
   cg.validate_parameter(p, id);
   g.apply_parameter(p);
   g.translate(v);
+  cg.bounds(v, v);  // world-space bounding box
   cg.geometry_state(values, v, v);
 };
 

@@ -77,6 +77,10 @@ void Sphere::validate_parameter(const Parameter& p, const std::string& where) co
   } else if (!(std::isfinite(p.data[0]) && p.data[0] > 0.0f)) {
     throw std::invalid_argument(where + ": must be finite and > 0 (got " + std::to_string(p.data[0]) + ")");
   }
+  // p.data is this sphere's centre or radius, edited in place.
+  if (max_component(glm::abs(center)) + radius > kMaxCoordinate)
+    throw std::invalid_argument(where + ": the sphere (centre " + format_values(&center.x, 3) + ", radius " + format_values(&radius, 1) +
+                                ") reaches beyond the traceable range (|coordinate| <= 1e18)");
 }
 
 void Sphere::geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const {

@@ -28,6 +28,10 @@ struct Sphere {
   void validate_parameter(const Parameter& p, const std::string& where) const;
   void apply_parameter(const Parameter&) {}
   void translate(const Vec3& delta) { center += delta; }
+  void bounds(Vec3& lo, Vec3& hi) const {
+    lo = center - Vec3(radius);
+    hi = center + Vec3(radius);
+  }
   void geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const;
 };
 

@@ -284,8 +284,11 @@ Transform Props::parse_transform(const json& v, const std::string& k) const {
   }
   if (!v.is_object() || v.size() != 1)
     fail("'" + k + "' must be a 4x4 matrix, one of {translate, scale, rotate, look_at, matrix}, or a list of them (got " + brief(v) + ")");
-  const std::string op = v.begin().key();
-  const json& arg = v.begin().value();
+  // The one key and its value (not a structured binding to *v.items().begin(): the proxy it
+  // refers to dies at the end of that statement; AddressSanitizer found the dangling read).
+  const auto step = v.begin();
+  const std::string op = step.key();
+  const json& arg = step.value();
   if (op == "translate") return Transform::translate(vec3d(arg));
   if (op == "scale") return Transform::scale(arg.is_number() ? Vec3d(arg.get<double>()) : vec3d(arg));
   if (op == "matrix") return matrix(arg);

@@ -5,15 +5,16 @@
 #pragma once
 #include <map>
 #include <string>
+#include "core/geometry/ray.h"
 #include "core/io/scene/props.h"
 
 namespace limn::io_detail {
 
 // Sphere radii after to_world: the intersection and the area use r^2 in float.
 inline constexpr float kMinRadius = 1e-18f, kMaxRadius = 1e18f;
-// World coordinates of geometry and of the camera: Embree traces rays whose origins have components
-// of at most 1.844e18 (and aborts on others), and every hit point is the origin of the next ray.
-inline constexpr double kMaxCoordinate = 1e18;
+// World coordinates of geometry and of the camera are within kMaxCoordinate (core/geometry/ray.h),
+// the same bound update() checks.
+using limn::kMaxCoordinate;
 
 // Heightfields have at most this many heights (rows x columns).
 inline constexpr uint64_t kMaxHeightfieldSamples = uint64_t(1) << 24;  // e.g. 4096 x 4096

@@ -30,6 +30,7 @@ void EnvmapEmitter::build_distribution() {
 
 Spectrum EnvmapEmitter::eval(const Vec3& d_world) const {
   const Vec2 uv = env_uv(glm::normalize(world_from_env.inverse().vector(d_world)));
+  if (!(uv.x >= 0.0f && uv.x <= 1.0f && uv.y >= 0.0f && uv.y <= 1.0f)) return Spectrum(0.0f);  // NaN: a direction that is not one
   const int x = std::min(int(uv.x * image->width), image->width - 1);
   const int y = std::min(int(uv.y * image->height), image->height - 1);
   return scale * image->texel(x, y);

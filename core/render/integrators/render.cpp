@@ -15,7 +15,11 @@ Image render(const Scene& scene, const RenderOptions& options, RenderStats* stat
   const auto lock = scene.render_lock();
   const int W = scene.camera.width, H = scene.camera.height;
   const int spp = options.spp > 0 ? options.spp : scene.spp;
-  if (spp <= 0) throw std::invalid_argument("spp must be > 0 (got " + std::to_string(spp) + ")");
+  if (spp <= 0) throw std::invalid_argument(scene.source + ": spp must be > 0 (got " + std::to_string(spp) + ")");
+  if (options.threads < 0 || options.threads > kMaxThreads)
+    throw std::invalid_argument(scene.source + ": threads must be in [0, " + std::to_string(kMaxThreads) + "] (0: all cores; got " +
+                                std::to_string(options.threads) + ")");
+  const uint64_t invalid_rays_before = scene.invalid_rays();
   const int max_depth = effective_max_depth(scene, options.max_depth);
   Image img{W, H, std::vector<float>(size_t(W) * H * 3, 0.0f)};
 
@@ -72,6 +76,7 @@ Image render(const Scene& scene, const RenderOptions& options, RenderStats* stat
     stats->samples = uint64_t(W) * H * spp;
     stats->rays = rays;
     stats->invalid_samples = invalid;
+    stats->invalid_rays = scene.invalid_rays() - invalid_rays_before;
   }
   return img;
 }

@@ -13,6 +13,9 @@ struct Image {
   std::vector<float> rgb;  // 3 floats per pixel, rows top to bottom, linear RGB
 };
 
+// The most worker threads a call may ask for (0 asks for all cores).
+inline constexpr int kMaxThreads = 1024;
+
 struct RenderOptions {
   int spp = 0;             // 0: the scene's sampler sample_count
   uint64_t seed = 0;
@@ -27,6 +30,7 @@ struct RenderStats {
   uint64_t samples = 0;
   uint64_t rays = 0;
   uint64_t invalid_samples = 0;  // NaN/Inf/negative path contributions, counted and dropped
+  uint64_t invalid_rays = 0;     // rays that could not be traced (Scene::invalid_rays), missed
 };
 
 struct RenderCancelled : std::runtime_error {

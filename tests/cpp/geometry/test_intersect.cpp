@@ -144,3 +144,24 @@ TEST_CASE("transforms: composition order, inverses, look_at convention") {
   CHECK_THROWS_AS(Transform::scale(Vec3d(1, 0, 1)), std::invalid_argument);
   CHECK_THROWS_AS(Transform::look_at(Vec3d(0), Vec3d(0, 0, 1), Vec3d(0, 0, 1)), std::invalid_argument);
 }
+
+TEST_CASE("accel: rays Embree cannot trace miss and are counted, never reach Embree") {
+  // Embree asserts on NaN or components beyond FLT_LARGE (1.844e18) in origin or direction.
+  std::vector<Shape> shapes{quad_shape(1.0f, 0.0f)};
+  Accel accel(shapes);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  SurfaceInteraction si;
+  REQUIRE(accel.intersect(Ray{Vec3(0, 0, 1), Vec3(0, 0, -1)}, si));  // an ordinary ray hits
+  CHECK(accel.invalid_rays() == 0);
+  const Ray bad[] = {Ray{Vec3(1e38f, 0, 1), Vec3(0, 0, -1)}, Ray{Vec3(0, 0, 1), Vec3(nan, 0, -1)},
+                     Ray{Vec3(0, 0, 1), Vec3(0, 0, -1), nan, kInfinity}, Ray{Vec3(0, 0, kInfinity), Vec3(0, 0, -1)},
+                     Ray{Vec3(0, 0, 1), Vec3(0, 0, -2e18f)}};
+  for (const Ray& r : bad) {
+    CHECK(!accel.intersect(r, si));
+    CHECK(!accel.occluded(r));
+  }
+  CHECK(accel.invalid_rays() == 2 * std::size(bad));
+  // Up to the limit rays are traced as usual.
+  CHECK(accel.intersect(Ray{Vec3(0.5f, 0.5f, 1e18f), Vec3(0, 0, -1)}, si));
+  CHECK(accel.invalid_rays() == 2 * std::size(bad));
+}

@@ -392,10 +392,17 @@ void Heightfield::list_parameters(const std::string& id, int index, std::vector<
 }
 
 void Heightfield::validate_parameter(const Parameter& p, const std::string& where) const {
-  for (size_t i = 0; i < p.size(); ++i)
+  // Heights reach height_scale * scale * |h| from the field's origin (a similarity).
+  const Vec3 origin = world_from_local.point(Vec3(0.0f));
+  const double reach = double(max_component(glm::abs(origin))) + double(scale) * std::max(width, depth);
+  for (size_t i = 0; i < p.size(); ++i) {
     if (!std::isfinite(p.data[i]))
       throw std::invalid_argument(where + ": height at row " + std::to_string(i / nx) + ", column " + std::to_string(i % nx) +
                                   " is not finite (" + std::to_string(p.data[i]) + ")");
+    if (reach + double(scale) * height_scale * std::abs(p.data[i]) > kMaxCoordinate)
+      throw std::invalid_argument(where + ": height at row " + std::to_string(i / nx) + ", column " + std::to_string(i % nx) + " (" +
+                                  format_values(p.data + i, 1) + ") is beyond the traceable range (|coordinate| <= 1e18)");
+  }
 }
 
 void Heightfield::geometry_state(std::vector<float>& values, Vec3& lo, Vec3& hi) const {
