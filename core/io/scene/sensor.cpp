@@ -5,6 +5,7 @@
 #include <limits>
 #include "core/io/formats/files.h"
 #include "core/io/scene/shapes.h"
+#include "core/render/integrators/render.h"
 
 namespace limn::io_detail {
 
@@ -48,7 +49,8 @@ void load_sensor(Context& ctx, const json& j, const std::string& id) {
       Props sp(ctx, *child, describe("sampler", k, ctype));
       // The same default as a sensor without a sampler (Scene::spp).
       ctx.scene->spp = sp.integer("sample_count", ctx.scene->spp);
-      if (ctx.scene->spp <= 0) sp.fail("sample_count must be > 0 (got " + std::to_string(ctx.scene->spp) + ")");
+      if (ctx.scene->spp <= 0 || ctx.scene->spp > kMaxSpp)
+        sp.fail("sample_count must be in [1, " + std::to_string(kMaxSpp) + "] (got " + std::to_string(ctx.scene->spp) + ")");
       if (ctype != "independent") ctx.scene->warnings.push_back(ctx.source + ": sampler '" + k + "': '" + ctype + "' is rendered with independent samples");
       sp.mark_used("seed");
       sp.check_unused();
