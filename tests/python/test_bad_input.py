@@ -327,6 +327,11 @@ def test_deep_and_zero_d_values_in_dictionaries():
     assert limn.load_dict(d).params["ball.radius"] == 0.5
     d["ball"]["radius"] = np.array(np.nan)
     expect(lambda: limn.load_dict(d), "'scene.ball.radius' is not finite")
+    d["ball"]["radius"] = np.array([[0.5]])  # was "(got {"__limn_array__":0})"
+    expect(lambda: limn.load_dict(d), "shape 'ball' (sphere)", "'radius' must be a number (got an array of shape (1, 1))")
+    d["ball"]["radius"] = 0.5
+    d["ball"]["center"] = np.zeros(2)
+    expect(lambda: limn.load_dict(d), "shape 'ball' (sphere)", "'center' must have 3 values (got 2)")
     d = sphere_over_plane()
     deep = 0
     for _ in range(100000):

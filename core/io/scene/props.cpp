@@ -160,6 +160,18 @@ Texture Props::texture(const std::string& k, const Spectrum& def) const {
   return t;
 }
 
+std::string Props::brief(const json& v) const {
+  if (v.is_object() && v.size() == 1 && v.contains("__limn_array__")) {
+    const json& idx = v.at("__limn_array__");
+    if (m_ctx.arrays && idx.is_number_integer() && idx.get<size_t>() < m_ctx.arrays->size()) {
+      std::string shape;
+      for (size_t d : (*m_ctx.arrays)[idx.get<size_t>()].shape) shape += (shape.empty() ? "" : ", ") + std::to_string(d);
+      return "an array of shape (" + shape + (m_ctx.arrays->at(idx.get<size_t>()).shape.size() == 1 ? ",)" : ")");
+    }
+  }
+  return io_detail::brief(v);
+}
+
 const ArrayData& Props::array_ref(const json& v, const std::string& k) const {
   const json& idx = v.at("__limn_array__");
   if (!m_ctx.arrays || !idx.is_number_integer() || idx.get<size_t>() >= m_ctx.arrays->size())

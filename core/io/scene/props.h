@@ -47,6 +47,9 @@ class Props {
     throw std::invalid_argument(m_ctx.source + ": " + m_what + ": " + msg);
   }
   const std::string& what() const { return m_what; }
+  // A value for an error message: io_detail::brief, but an array passed from Python (numpy) as
+  // "an array of shape (...)" rather than its placeholder {"__limn_array__": i}.
+  std::string brief(const json& v) const;
   Context& ctx() const { return m_ctx; }
   bool has(const std::string& k) const { return m_j.contains(k); }
   const json& raw(const std::string& k) const {
