@@ -104,6 +104,11 @@ def test_adam_refuses_non_finite_hyper_parameters():
     with pytest.raises(ValueError, match="step is not finite"):
         opt.step(np.array([1e200, 0, 0]))  # g * g overflows
     assert np.array_equal(x, np.zeros(3))  # unchanged
+    x32 = np.zeros(3, np.float32)
+    opt = limn.optim.Adam(x32, lr=1e300)  # a finite float64 step, inf in float32 (was written into x32)
+    with pytest.raises(ValueError, match=r"step \(lr 1e\+300\) takes the parameters beyond the range of float32"):
+        opt.step(np.ones(3))
+    assert np.array_equal(x32, np.zeros(3)) and opt.t == 0
 
 
 def test_fit_stops_at_divergence_and_keeps_the_last_good_state():
