@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test of limn and ends with one summary line "N passed, N failed":
 #   C++ core (doctest), Python package (pytest), Blender add-on in Debian's Blender 3.4 and in the
-#   bpy module (Blender 4.5 LTS from PyPI). Installs and builds what is missing first.
+#   bpy module (Blender 4.5 LTS from PyPI), and the libFuzzer targets briefly (tests/fuzz/run.sh;
+#   FUZZ_SECONDS=S per target, default 20). Installs and builds what is missing first.
 #   ./test.sh --sanitize   also builds the core, its tests and the Python module under AddressSanitizer
 #                          and UndefinedBehaviorSanitizer (build/asan) and runs the C++ suite and a
 #                          Python subset with them (docs/testing.md, "Sanitizers"); CI runs this.
@@ -26,6 +27,9 @@ suite() {  # suite NAME REPORT COMMAND...: REPORT is the JUnit file the command 
 
 suite "C++ core (doctest)" cpp.xml build/cpp/limn_tests --reporters=junit --out="$RESULTS/cpp.xml" --no-intro
 suite "Python package (pytest)" python.xml "$PY" -m pytest -q tests/python --junitxml="$RESULTS/python.xml"
+# Each libFuzzer target replays its committed corpus, then fuzzes for FUZZ_SECONDS (default 20).
+FUZZ_SECONDS=${FUZZ_SECONDS:-20}
+suite "Fuzz targets (libFuzzer, ${FUZZ_SECONDS} s each)" fuzz.xml tests/fuzz/run.sh --time "$FUZZ_SECONDS" --junitxml "$RESULTS/fuzz.xml"
 suite "Blender 3.4 add-on (Debian blender)" blender-3.4.xml blender -b --factory-startup -noaudio --python-exit-code 1 \
       --python tests/blender/run.py -- --junitxml="$RESULTS/blender-3.4.xml"
 suite "Blender 4.5 LTS add-on (bpy module)" blender-bpy.xml "$PY" tests/blender/run.py --junitxml="$RESULTS/blender-bpy.xml"

@@ -50,8 +50,12 @@ class Adam:
             step = self.lr * m_hat / (np.sqrt(v_hat) + self.eps)
         if not (np.isfinite(v).all() and np.isfinite(step).all()):  # the state and the parameters stay as they were
             raise ValueError("Adam: the step is not finite (the gradient's square overflows)")
+        with np.errstate(over="ignore", invalid="ignore"):
+            x = self.x - step.astype(self.x.dtype)
+        if not np.isfinite(x).all():  # a finite float64 step beyond the parameters' type (lr 1e300, float32)
+            raise ValueError(f"Adam: the step (lr {self.lr:g}) takes the parameters beyond the range of {self.x.dtype}; lower lr")
         self.t, self.m, self.v = self.t + 1, m, v
-        self.x -= step.astype(self.x.dtype)
+        self.x[...] = x
 
 
 def grid_faces(rows: int, columns: int) -> np.ndarray:

@@ -300,42 +300,91 @@ Scene.render_backward.__doc__ += _defaults_text()
 
 def load(path: str | os.PathLike) -> Scene:
     """Load a scene description (JSON, Mitsuba-3 dictionary conventions) from a file."""
-    path = os.fspath(path)
-    if not os.path.exists(path):
-        raise ValueError(f"scene file '{path}' not found")
-    with open(path, "rb") as f:
-        fingerprint = os.path.abspath(path).encode() + b"\0" + f.read()
+    import stat
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise TypeError(f"limn.load: the scene file must be a path (str or os.PathLike), not {type(path).__name__}")
+    path = os.fsdecode(os.fspath(path))
+    # What is not a regular file is refused before it is opened: opening a FIFO would block.
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise ValueError(f"scene file '{path}' not found") from None
+    except (OSError, ValueError) as e:
+        raise ValueError(f"scene file {path!r}: cannot read it ({e})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ValueError(f"scene file '{path}' is a directory, not a file")
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"scene file '{path}' is not a regular file (a FIFO, socket or device)")
+    try:
+        with open(path, "rb") as f:
+            fingerprint = os.path.abspath(path).encode(errors="surrogateescape") + b"\0" + f.read()
+    except OSError as e:
+        raise ValueError(f"scene file '{path}': cannot read it ({e.strerror})") from None
     return Scene(_core.load_file(path), fingerprint)
 
 
 def load_dict(description: dict, base_dir: str | os.PathLike | None = None, source: str = "<dict>") -> Scene:
     """Load a scene from a dictionary in the same format as the JSON files. Values may be numpy
-    arrays (e.g. ``vertex_positions`` and ``faces`` of a ``mesh`` shape, a 4x4 ``to_world``).
-    Relative file names are resolved against ``base_dir`` (default: the working directory)."""
+    arrays (e.g. ``vertex_positions`` and ``faces`` of a ``mesh`` shape, a 4x4 ``to_world``; 0-d
+    arrays are scalars). Relative file names are resolved against ``base_dir`` (default: the
+    working directory)."""
     if not isinstance(description, dict):
         raise ValueError(f"load_dict expects a dict, got {type(description).__name__}")
     arrays: list[np.ndarray] = []
+    MAX_NESTING = 256  # deeper descriptions are refused, as the C++ loader refuses deeper JSON
 
-    def convert(value, where: str):
+    def name(where: str) -> str:
+        return where if len(where) <= 120 else where[:60] + "..." + where[-57:]
+
+    def convert(value, where: str, depth: int):
+        if depth > MAX_NESTING:
+            raise ValueError(f"{source}: '{name(where)}' nests deeper than {MAX_NESTING} levels")
         if isinstance(value, np.ndarray):
+            if value.ndim == 0:
+                return convert(value.item(), where, depth)
+            if value.dtype.kind not in "biuf":
+                raise ValueError(f"{source}: '{name(where)}' is an array of {value.dtype}; arrays must hold numbers")
             arrays.append(np.ascontiguousarray(value))
             return {"__limn_array__": len(arrays) - 1}
         if isinstance(value, dict):
-            return {str(k): convert(v, f"{where}.{k}") for k, v in value.items()}
+            out = {}
+            for k, v in value.items():
+                if not isinstance(k, str):
+                    raise TypeError(f"{source}: '{name(where)}' has the key {k!r} of type {type(k).__name__}; keys must be strings")
+                out[text(k, where)] = convert(v, f"{where}.{k}", depth + 1)
+            return out
         if isinstance(value, (list, tuple)):
-            return [convert(v, where) for v in value]
+            return [convert(v, where, depth + 1) for v in value]
         if isinstance(value, np.generic):
-            return convert(value.item(), where)
-        if isinstance(value, float) and not np.isfinite(value):
-            raise ValueError(f"{source}: '{where}' is not finite ({value})")
-        if value is None or isinstance(value, (bool, int, float, str)):
+            return convert(value.item(), where, depth)
+        if isinstance(value, bool) or value is None:
             return value
-        raise ValueError(f"{source}: '{where}' has a value of unsupported type {type(value).__name__}")
+        if isinstance(value, int):
+            if abs(value) >= 2 ** 64:  # beyond what JSON numbers hold exactly; beyond double it is an error
+                try:
+                    float(value)
+                except OverflowError:
+                    raise ValueError(f"{source}: '{name(where)}' is out of range (an integer of {len(str(abs(value)))} digits)") from None
+            return value
+        if isinstance(value, float):
+            if not math.isfinite(value):
+                raise ValueError(f"{source}: '{name(where)}' is not finite ({value})")
+            return value
+        if isinstance(value, str):
+            return text(value, where)
+        raise ValueError(f"{source}: '{name(where)}' has a value of unsupported type {type(value).__name__}")
 
-    text = json.dumps(convert(description, "scene"), allow_nan=False)
+    def text(value: str, where: str) -> str:
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError:
+            raise ValueError(f"{source}: '{name(where)}' has text that is not valid Unicode ({value!r})") from None
+        return value
+
+    text_ = json.dumps(convert(description, "scene", 0), allow_nan=False)
     base = os.fspath(base_dir) if base_dir is not None else os.getcwd()
-    digest = hashlib.sha256(text.encode())
+    digest = hashlib.sha256(text_.encode())
     for a in arrays:
         digest.update(str((a.dtype.str, a.shape)).encode())
         digest.update(a.tobytes())
-    return Scene(_core.load_json(text, source, base, arrays), digest.digest())
+    return Scene(_core.load_json(text_, source, base, arrays), digest.digest())

@@ -180,7 +180,13 @@ DiffOptions diff_options(const py::dict& options) {
     const std::string k = py::str(key);
     const auto f = std::find_if(fields.begin(), fields.end(), [&](const DiffOptionField& d) { return k == d.name; });
     if (f == fields.end()) throw std::invalid_argument("unknown derivative option '" + k + "'");
-    f->set(o, value);
+    try {
+      f->set(o, value);
+    } catch (const py::cast_error&) {  // e.g. an int beyond C++'s int: pybind11's message names neither the option nor the value
+      std::string got = py::repr(value);
+      if (got.size() > 80) got = got.substr(0, 80) + "...";
+      throw std::invalid_argument("derivative option '" + k + "' has the wrong type or is out of range (got " + got + ")");
+    }
   }
   return o;
 }

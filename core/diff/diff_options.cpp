@@ -27,10 +27,11 @@ bool in(double v, double lo, double hi) { return v >= lo && v <= hi; }  // false
 void validate_diff_options(const Scene& scene, const DiffParams& params, const DiffOptions& opt) {
   if (params.empty()) throw std::invalid_argument(scene.source + ": no differentiable parameters (call set_differentiable first)");
   // Terms and sample counts.
-  require(opt.spp >= 0, scene, "spp", ">= 0 (0: the scene's sample count)", opt.spp);
-  require(opt.spp_interior >= -1, scene, "spp_interior", ">= 0 (-1: spp)", opt.spp_interior);
-  require(opt.spp_primary >= -1, scene, "spp_primary", ">= 0 (-1: spp)", opt.spp_primary);
-  require(opt.spp_boundary >= -1, scene, "spp_boundary", ">= 0 (-1: spp)", opt.spp_boundary);
+  const std::string max_spp = std::to_string(kMaxSpp);
+  require(in(opt.spp, 0, kMaxSpp), scene, "spp", "in [0, " + max_spp + "] (0: the scene's sample count)", opt.spp);
+  require(in(opt.spp_interior, -1, kMaxSpp), scene, "spp_interior", "in [0, " + max_spp + "] (-1: spp)", opt.spp_interior);
+  require(in(opt.spp_primary, -1, kMaxSpp), scene, "spp_primary", "in [0, " + max_spp + "] (-1: spp)", opt.spp_primary);
+  require(in(opt.spp_boundary, -1, kMaxSpp), scene, "spp_boundary", "in [0, " + max_spp + "] (-1: spp)", opt.spp_boundary);
   require(in(opt.threads, 0, kMaxThreads), scene, "threads", "in [0, " + std::to_string(kMaxThreads) + "] (0: all cores)", opt.threads);
   // Indirect boundary term: sampling and guides.
   require(opt.boundary_sampler == "independent" || opt.boundary_sampler == "stratified", scene, "boundary_sampler",

@@ -104,6 +104,11 @@ def test_adam_refuses_non_finite_hyper_parameters():
     with pytest.raises(ValueError, match="step is not finite"):
         opt.step(np.array([1e200, 0, 0]))  # g * g overflows
     assert np.array_equal(x, np.zeros(3))  # unchanged
+    x32 = np.zeros(3, np.float32)
+    opt = limn.optim.Adam(x32, lr=1e300)  # a finite float64 step, inf in float32 (was written into x32)
+    with pytest.raises(ValueError, match=r"step \(lr 1e\+300\) takes the parameters beyond the range of float32"):
+        opt.step(np.ones(3))
+    assert np.array_equal(x32, np.zeros(3)) and opt.t == 0
 
 
 def test_fit_stops_at_divergence_and_keeps_the_last_good_state():
@@ -123,3 +128,21 @@ def test_fit_stops_at_divergence_and_keeps_the_last_good_state():
         warnings.simplefilter("error")
         result = limn.optim.fit([(scene, target)], "ball.center", iterations=2, lr=1e-3, spp=2)
     assert not result.diverged and len(result.losses) == 2
+
+
+def test_sample_counts_beyond_the_limit_are_refused_naming_the_option():
+    """2^31 - 1 samples per pixel was accepted and ran for days (the hostile battery's hangs); a
+    count beyond C++'s int was pybind11's cast error naming neither the option nor the value."""
+    scene = small_scene()
+    with pytest.raises(ValueError, match=r"spp must be in \[1, 1048576\] \(got 2147483647\)"):
+        scene.render(spp=2**31 - 1)
+    scene.set_differentiable(["ball.center"])
+    for option in ("spp", "spp_interior", "spp_primary", "spp_boundary"):
+        with pytest.raises(ValueError, match=rf"{option} must be in \[0, 1048576\].*got 2147483647"):
+            scene.render_forward({"ball.center": np.ones(3)}, **{option: 2**31 - 1})
+    with pytest.raises(ValueError, match=r"derivative option 'spp' has the wrong type or is out of range \(got 1000000000000\)"):
+        scene.render_backward(np.ones((12, 12, 3), np.float32), spp=10**12)
+    d = sphere_over_plane(width=12, height=12, spp=2)
+    d["sensor"]["sampler"]["sample_count"] = 2**30
+    with pytest.raises(ValueError, match=r"sample_count must be in \[1, 1048576\] \(got 1073741824\)"):
+        limn.load_dict(d)

@@ -1,6 +1,7 @@
 #include "core/io/scene/bsdfs.h"
 
 #include <map>
+#include "core/io/formats/files.h"
 
 namespace limn::io_detail {
 
@@ -29,7 +30,7 @@ float ior_value(const Props& p, const std::string& k, float def) {
   float ior;
   if (v.is_string()) {
     auto it = names.find(v.get<std::string>());
-    if (it == names.end()) p.fail("unknown material name '" + v.get<std::string>() + "' for '" + k + "'");
+    if (it == names.end()) p.fail("unknown material name '" + printable(v.get<std::string>(), 60) + "' for '" + k + "'");
     ior = it->second;
   } else {
     ior = p.number(k);
@@ -43,7 +44,7 @@ Microfacet load_microfacet(const Props& p) {
   const std::string dist = p.string("distribution", "beckmann");
   if (dist == "ggx") m.type = MicrofacetType::GGX;
   else if (dist == "beckmann") m.type = MicrofacetType::Beckmann;
-  else p.fail("distribution must be 'ggx' or 'beckmann' (got '" + dist + "')");
+  else p.fail("distribution must be 'ggx' or 'beckmann' (got '" + printable(dist, 60) + "')");
   m.alpha = p.number("alpha", 0.1f);
   if (p.has("alpha_u") || p.has("alpha_v")) {
     const float au = p.number("alpha_u", m.alpha), av = p.number("alpha_v", m.alpha);
@@ -64,7 +65,7 @@ void load_conductor_ior(const Props& p, Spectrum& eta, Spectrum& k) {
   }
   const std::string name = p.string("material", "none");
   auto it = conductor_table().find(name);
-  if (it == conductor_table().end()) p.fail("unknown conductor material '" + name + "' (known: none, Au, Ag, Cu, Al)");
+  if (it == conductor_table().end()) p.fail("unknown conductor material '" + printable(name, 60) + "' (known: none, Au, Ag, Cu, Al)");
   eta = it->second.eta;
   k = it->second.k;
 }
@@ -95,6 +96,9 @@ BsdfModel load_bsdf_model(Context& ctx, const Props& p, const std::string& type,
     const auto kids = p.children();
     if (kids.size() != 1) p.fail("twosided needs exactly one nested bsdf (got " + std::to_string(kids.size()) + ")");
     p.mark_used(kids[0].first);
+    if (kids[0].second->contains("id"))
+      p.fail("the bsdf nested in twosided (under '" + printable(kids[0].first, 60) + "') takes the twosided's id '" + id + "'; remove its \"id\" " +
+             brief(kids[0].second->at("id")));
     Bsdf inner = load_bsdf(ctx, *kids[0].second, id);
     if (inner.twosided) p.fail("twosided cannot wrap another twosided");
     if (inner.transmits()) p.fail("twosided cannot wrap a transmissive bsdf");

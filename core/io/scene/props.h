@@ -8,13 +8,11 @@
 #include <string>
 #include <utility>
 #include <vector>
-#include <nlohmann/json.hpp>
 #include "core/io/scene/array_data.h"
+#include "core/io/scene/json_text.h"
 #include "core/render/scene.h"
 
 namespace limn::io_detail {
-
-using json = nlohmann::json;
 
 // j[key] if it is a string, else `def`; wrong types are reported by the caller's checks, never as
 // nlohmann exceptions.
@@ -49,6 +47,9 @@ class Props {
     throw std::invalid_argument(m_ctx.source + ": " + m_what + ": " + msg);
   }
   const std::string& what() const { return m_what; }
+  // A value for an error message: io_detail::brief, but an array passed from Python (numpy) as
+  // "an array of shape (...)" rather than its placeholder {"__limn_array__": i}.
+  std::string brief(const json& v) const;
   Context& ctx() const { return m_ctx; }
   bool has(const std::string& k) const { return m_j.contains(k); }
   const json& raw(const std::string& k) const {
@@ -77,7 +78,10 @@ class Props {
   // A dense array from nested JSON lists or from an array passed alongside the dictionary.
   ArrayData array(const std::string& k) const;
 
+  // Refused: non-finite entries (also of the inverse), a last row other than [0, 0, 0, 1], singular
+  // or nearly singular (the determinant of its unit axes below 1e-12).
   Transform transform(const std::string& k) const;
+  void check_transform(const Transform& t, const std::string& k) const;
 
   // Nested objects (values that are dictionaries with a "type"), in file order.
   std::vector<std::pair<std::string, const json*>> children() const;
@@ -96,10 +100,21 @@ class Props {
 
 std::string type_of(const json& j);
 
+// Length without overflow or underflow at any scale (glm::length squares).
+double norm(const Vec3d& v);
+
+// "(4, 3)"
+std::string shape_text(const std::vector<size_t>& shape);
+
+// An id (a key of the description or an "id" value) must have 1 to 256 characters and no control
+// characters: it names parameters ("<id>.center") and appears in every message about its object.
+bool valid_id(const std::string& id);
+
 std::string describe(const std::string& kind, const std::string& id, const std::string& type);
 
-// Fails unless `t` is a rotation, uniform scale and translation; `scale` is its scale factor.
-void check_similarity(const Props& p, const Transform& t, float& scale);
+// Fails unless `t` (the value of `k`) is a rotation, uniform scale and translation; returns its
+// scale factor.
+double check_similarity(const Props& p, const Transform& t, const std::string& k = "to_world");
 
 // An explicit "id" on a nested object must be unique like the top-level ones; without one the
 // object is named after its owner.

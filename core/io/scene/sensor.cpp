@@ -1,6 +1,11 @@
 #include "core/io/scene/sensor.h"
 
+#include <cfloat>
+#include <cstdint>
 #include <limits>
+#include "core/io/formats/files.h"
+#include "core/io/scene/shapes.h"
+#include "core/render/integrators/render.h"
 
 namespace limn::io_detail {
 
@@ -11,15 +16,22 @@ void load_sensor(Context& ctx, const json& j, const std::string& id) {
   Camera& cam = ctx.scene->camera;
   cam.width = 768;
   cam.height = 576;
+  std::string film_key, sampler_key;
   for (const auto& [key, child] : p.children()) {
     const std::string ctype = type_of(*child);
+    const std::string k = printable(key, 60);
     p.mark_used(key);
     if (ctype == "hdrfilm") {
-      Props fp(ctx, *child, describe("film", key, ctype));
+      if (!film_key.empty()) p.fail("has two films ('" + film_key + "' and '" + k + "'); a sensor has one");
+      film_key = k;
+      Props fp(ctx, *child, describe("film", k, ctype));
       cam.width = fp.integer("width", 768);
       cam.height = fp.integer("height", 576);
       if (cam.width <= 0 || cam.height <= 0 || cam.width > 32768 || cam.height > 32768)
         fp.fail("width and height must be in [1, 32768] (got " + std::to_string(cam.width) + " x " + std::to_string(cam.height) + ")");
+      if (uint64_t(cam.width) * uint64_t(cam.height) > kMaxFilmPixels)
+        fp.fail("width x height must be at most " + std::to_string(kMaxFilmPixels) + " pixels (got " + std::to_string(cam.width) + " x " +
+                std::to_string(cam.height) + ")");
       // Mitsuba's crop window: the image is the window; the fov still covers the whole film.
       if (fp.has("crop_offset_x") || fp.has("crop_offset_y") || fp.has("crop_width") || fp.has("crop_height")) {
         cam.full_width = cam.width;
@@ -37,6 +49,8 @@ void load_sensor(Context& ctx, const json& j, const std::string& id) {
       for (const auto& [fk, fchild] : fp.children()) {
         fp.mark_used(fk);
         const std::string ft = type_of(*fchild);
+        if (known_types().count(ft) == 0 || known_types().at(ft) != Category::Filter)
+          fp.fail("a '" + printable(ft, 60) + "' cannot be nested in a film (under '" + printable(fk, 60) + "'; known filters: " + known_of(Category::Filter) + ")");
         Props rp(ctx, *fchild, describe("rfilter", fk, ft));
         if (ft == "box") {
           cam.filter = FilmFilter{};
@@ -48,7 +62,7 @@ void load_sensor(Context& ctx, const json& j, const std::string& id) {
             rp.fail("stddev must be in [0.25, 4] pixels (got " + std::to_string(cam.filter.stddev) + ")");
           cam.filter.radius = 4.0 * cam.filter.stddev;  // Mitsuba's cut-off
         } else {
-          ctx.scene->warnings.push_back(ctx.source + ": film '" + key + "': reconstruction filter '" + ft +
+          ctx.scene->warnings.push_back(ctx.source + ": film '" + k + "': reconstruction filter '" + printable(ft, 60) +
                                         "' is not supported (known: box, gaussian); limn uses box (uniform over each pixel)");
           continue;
         }
@@ -58,17 +72,31 @@ void load_sensor(Context& ctx, const json& j, const std::string& id) {
       fp.mark_used("component_format");
       fp.check_unused();
     } else if (known_types().count(ctype) && known_types().at(ctype) == Category::Sampler) {
-      Props sp(ctx, *child, describe("sampler", key, ctype));
-      ctx.scene->spp = sp.integer("sample_count", 4);
-      if (ctx.scene->spp <= 0) sp.fail("sample_count must be > 0 (got " + std::to_string(ctx.scene->spp) + ")");
-      if (ctype != "independent") ctx.scene->warnings.push_back(ctx.source + ": sampler '" + key + "': '" + ctype + "' is rendered with independent samples");
+      if (!sampler_key.empty()) p.fail("has two samplers ('" + sampler_key + "' and '" + k + "'); a sensor has one");
+      sampler_key = k;
+      Props sp(ctx, *child, describe("sampler", k, ctype));
+      // The same default as a sensor without a sampler (Scene::spp).
+      ctx.scene->spp = sp.integer("sample_count", ctx.scene->spp);
+      if (ctx.scene->spp <= 0 || ctx.scene->spp > kMaxSpp)
+        sp.fail("sample_count must be in [1, " + std::to_string(kMaxSpp) + "] (got " + std::to_string(ctx.scene->spp) + ")");
+      if (ctype != "independent") ctx.scene->warnings.push_back(ctx.source + ": sampler '" + k + "': '" + ctype + "' is rendered with independent samples");
       sp.mark_used("seed");
       sp.check_unused();
     } else {
-      p.fail("a '" + ctype + "' cannot be nested in a sensor (under '" + key + "')");
+      p.fail("a '" + printable(ctype, 60) + "' cannot be nested in a sensor (under '" + k + "')");
     }
   }
   cam.world_from_camera = p.transform("to_world");
+  // Rays leave from the transformed origin along transformed directions, in float.
+  const Mat4d& m = cam.world_from_camera.matrix();
+  for (int a = 0; a < 3; ++a) {
+    const double len = glm::length(Vec3d(m[a]));
+    if (!(len >= 1e-18 && len <= 1e18))
+      p.fail("'to_world' scales camera axis " + std::to_string(a) + " by " + number_text(len) + " (must be within [1e-18, 1e18])");
+    if (!(std::abs(m[3][a]) <= kMaxCoordinate))
+      p.fail("'to_world' puts the camera at coordinate " + number_text(m[3][a]) + ", beyond " + number_text(kMaxCoordinate) +
+             ", the largest world coordinate limn traces rays at");
+  }
   try {
     cam.set_fov(p.number("fov", 39.3077f), p.string("fov_axis", "x"));
   } catch (const std::invalid_argument& e) {
@@ -76,7 +104,8 @@ void load_sensor(Context& ctx, const json& j, const std::string& id) {
   }
   cam.near_clip = p.number("near_clip", 1e-2f);
   cam.far_clip = p.number("far_clip", 1e4f);
-  if (!(cam.near_clip > 0.0f && cam.far_clip > cam.near_clip)) p.fail("need 0 < near_clip < far_clip");
+  if (!(cam.near_clip > 0.0f && cam.far_clip > cam.near_clip))
+    p.fail("need 0 < near_clip < far_clip (got near_clip " + number_text(cam.near_clip) + ", far_clip " + number_text(cam.far_clip) + ")");
   p.check_unused();
 }
 

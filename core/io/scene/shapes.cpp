@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "core/io/formats/files.h"
 #include "core/io/scene/bsdfs.h"
 
 namespace limn::io_detail {
@@ -33,21 +34,27 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
     const std::string ctype = type_of(*child);
     auto cat = known_types().find(ctype);
     if (cat == known_types().end())
-      p.fail("unknown type '" + ctype + "' under '" + key + "' (known: bsdfs " + known_of(Category::Bsdf) + "; emitter area; ref)");
+      p.fail("unknown type '" + printable(ctype, 60) + "' under '" + printable(key, 60) + "' (known: bsdfs " + known_of(Category::Bsdf) + "; emitter area; ref)");
     p.mark_used(key);
     if (cat->second == Category::Ref) {
-      const std::string ref = str_field(*child, "id", "");
+      Props rp(ctx, *child, describe("shape", id, type) + ": '" + printable(key, 60) + "' (ref)");
+      if (!child->contains("id") || !child->at("id").is_string())
+        rp.fail("needs \"id\": the name of a top-level bsdf (got " + (child->contains("id") ? brief(child->at("id")) : std::string("no id")) + ")");
+      const std::string ref = child->at("id").get<std::string>();
       auto it = ctx.named_bsdfs.find(ref);
-      if (it == ctx.named_bsdfs.end()) p.fail("'" + key + "' refers to unknown bsdf '" + ref + "'");
-      if (shape.bsdf >= 0) p.fail("has more than one bsdf");
+      if (it == ctx.named_bsdfs.end())
+        p.fail("'" + printable(key, 60) + "' refers to unknown bsdf '" + printable(ref, 60) + "'" +
+               (ctx.ids.count(ref) ? " ('" + ref + "' is not a top-level bsdf)" : std::string()));
+      if (shape.bsdf >= 0) p.fail("has more than one bsdf (another under '" + printable(key, 60) + "')");
+      rp.check_unused();
       shape.bsdf = it->second;
     } else if (cat->second == Category::Bsdf) {
-      if (shape.bsdf >= 0) p.fail("has more than one bsdf");
+      if (shape.bsdf >= 0) p.fail("has more than one bsdf (another under '" + printable(key, 60) + "')");
       shape.bsdf = add_bsdf(ctx, load_bsdf(ctx, *child, nested_id(p, *child, id)));
     } else if (cat->second == Category::Emitter) {
-      if (ctype != "area") p.fail("only 'area' emitters can be attached to a shape (got '" + ctype + "' under '" + key + "')");
-      if (!can_emit) p.fail("a " + type + " cannot be an area emitter (under '" + key + "')");
-      if (shape.emitter >= 0) p.fail("has more than one emitter");
+      if (ctype != "area") p.fail("only 'area' emitters can be attached to a shape (got '" + ctype + "' under '" + printable(key, 60) + "')");
+      if (!can_emit) p.fail("a " + type + " cannot be an area emitter (under '" + printable(key, 60) + "')");
+      if (shape.emitter >= 0) p.fail("has more than one emitter (another under '" + printable(key, 60) + "')");
       Props ep(ctx, *child, describe("emitter", id, ctype));
       AreaEmitter a;
       a.shape = int(ctx.scene->shapes.size());
@@ -62,7 +69,7 @@ void load_shape(Context& ctx, const json& j, const std::string& id) {
       ctx.scene->emitters.push_back(Emitter{nested_id(p, *child, id), a});
       shape.emitter = int(ctx.scene->emitters.size() - 1);
     } else {
-      p.fail("a '" + ctype + "' cannot be nested in a shape (under '" + key + "')");
+      p.fail("a '" + ctype + "' cannot be nested in a shape (under '" + printable(key, 60) + "')");
     }
   }
   if (shape.bsdf < 0) shape.bsdf = add_bsdf(ctx, Bsdf{id, Diffuse{Texture{Spectrum(0.5f), nullptr}}, false});

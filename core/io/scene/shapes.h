@@ -5,9 +5,19 @@
 #pragma once
 #include <map>
 #include <string>
+#include "core/geometry/ray.h"
 #include "core/io/scene/props.h"
 
 namespace limn::io_detail {
+
+// Sphere radii after to_world: the intersection and the area use r^2 in float.
+inline constexpr float kMinRadius = 1e-18f, kMaxRadius = 1e18f;
+// World coordinates of geometry and of the camera are within kMaxCoordinate (core/geometry/ray.h),
+// the same bound update() checks.
+using limn::kMaxCoordinate;
+
+// Heightfields have at most this many heights (rows x columns).
+inline constexpr uint64_t kMaxHeightfieldSamples = uint64_t(1) << 24;  // e.g. 4096 x 4096
 
 // Builds the geometry of a shape of type `type`; to_world has been read already.
 using ShapeLoader = ShapeGeometry (*)(const Props& p, const std::string& type, const Transform& to_world);

@@ -15,7 +15,8 @@ Image render(const Scene& scene, const RenderOptions& options, RenderStats* stat
   const auto lock = scene.render_lock();
   const int W = scene.camera.width, H = scene.camera.height;
   const int spp = options.spp > 0 ? options.spp : scene.spp;
-  if (spp <= 0) throw std::invalid_argument(scene.source + ": spp must be > 0 (got " + std::to_string(spp) + ")");
+  if (spp <= 0 || spp > kMaxSpp)
+    throw std::invalid_argument(scene.source + ": spp must be in [1, " + std::to_string(kMaxSpp) + "] (got " + std::to_string(spp) + ")");
   if (options.threads < 0 || options.threads > kMaxThreads)
     throw std::invalid_argument(scene.source + ": threads must be in [0, " + std::to_string(kMaxThreads) + "] (0: all cores; got " +
                                 std::to_string(options.threads) + ")");

@@ -15,6 +15,9 @@ struct Image {
 
 // The most worker threads a call may ask for (0 asks for all cores).
 inline constexpr int kMaxThreads = 1024;
+// The most samples per pixel a call or a scene may ask for: 8x the largest count limn's own
+// benches use (131072). A mistyped count (2^31 - 1) is refused instead of running for days.
+inline constexpr int kMaxSpp = 1 << 20;
 
 struct RenderOptions {
   int spp = 0;             // 0: the scene's sampler sample_count
