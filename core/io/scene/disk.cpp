@@ -7,7 +7,7 @@ namespace limn::io_detail {
 ShapeGeometry load_disk(const Props& p, const std::string&, const Transform& to_world) {
   Disk d;
   float scale = 1.0f;
-  if (p.has("to_world")) check_similarity(p, to_world, scale);
+  if (p.has("to_world")) scale = float(check_similarity(p, to_world));
   if (!(scale > 0.0f) || !std::isfinite(scale)) p.fail("to_world must scale by a finite factor > 0 (got " + std::to_string(scale) + ")");
   d.center = to_world.point(Vec3(0.0f));
   d.n = glm::normalize(to_world.vector(Vec3(0, 0, 1)));  // faces to_world's +z

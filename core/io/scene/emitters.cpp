@@ -25,8 +25,7 @@ void load_emitter(Context& ctx, const json& j, const std::string& id) {
     // Mitsuba's spot: at to_world's origin, pointing along its +z, angles in degrees.
     PointEmitter pe;
     const Transform t = p.transform("to_world");
-    float unused_scale;
-    check_similarity(p, t, unused_scale);
+    check_similarity(p, t);
     pe.position = t.point(Vec3(0.0f));
     pe.axis = glm::normalize(t.vector(Vec3(0, 0, 1)));
     pe.intensity = p.spectrum("intensity", Spectrum(1.0f));
