@@ -517,6 +517,8 @@ void CameraSilhouettes<Mesh>::sides(const Scene&, const Mesh& m, const Silhouett
                                     CurveSides& out) {
   const MeshEdge& e = m.edges[size_t(curve.local)];
   out.count = 0;
+  // A non-manifold edge keeps two of its faces only; which one covers a side is not known here.
+  if (e.face_count > 2) return;
   for (int f : {e.face0, e.face1}) {
     if (f < 0 || out.count == 2) continue;
     const Vec3 a = m.vertex(m.indices[3 * size_t(f)]), b = m.vertex(m.indices[3 * size_t(f) + 1]), cv = m.vertex(m.indices[3 * size_t(f) + 2]);

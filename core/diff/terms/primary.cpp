@@ -73,11 +73,12 @@ bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, glm::dvec2& film_positi
   const SurfaceInteraction* side_surface[2] = {nullptr, nullptr};
   int chosen[2] = {-1, -1};
   if (sides.count > 0) {
-    // P must be what the camera sees there: an occluder in front takes both sides alike.
+    // P must be what the camera sees there: an occluder in front, another shape or another part
+    // of this one, takes both sides alike (1e-4: the faces at P are hit at t_p up to rounding).
     const float t_p = glm::dot(p_value - centre.o, centre.d);
     SurfaceInteraction first;
     counters.rays++;
-    if (m_scene.intersect(Ray{centre.o, centre.d, centre.tmin, t_p * (1.0f - 1e-4f)}, first) && first.shape != c.shape) {
+    if (m_scene.intersect(Ray{centre.o, centre.d, centre.tmin, t_p * (1.0f - 1e-4f)}, first)) {
       rays += counters.rays;
       return false;
     }
