@@ -12,7 +12,8 @@ from .scene import Scene
 # Part of every cached reference's key: the key holds the scene and the settings, not the code, so
 # bump this whenever a change alters primal images (not only their derivatives), or the cache
 # serves references of the old renderer. 2: a duplicated triangle counts once in smooth normals.
-PRIMAL_REVISION = 2
+# 3: microfacet D and sampling take sin^2 from x and y (glossy images move in the last bits).
+PRIMAL_REVISION = 3
 
 
 def default_cache_dir() -> str:

@@ -158,7 +158,7 @@ class Scene:
         Options (keyword arguments; their defaults are listed at the end):
 
         - ``guiding``: ``"auto"`` (the default) takes the projective grid below 256 boundary samples
-          per pixel and the octree from there, its leaves capped at the call's boundary sample count
+          per pixel and the octree from there, with one leaf per 16 of the call's boundary samples
           (docs/reports/default_estimator/README.md: at low budgets the octree's set-up outweighs its
           lower error); no guide when every boundary segment ends at a point or directional light (no
           bounce after the first hit, only delta emitters), which fixes its direction; the summary
