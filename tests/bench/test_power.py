@@ -188,12 +188,14 @@ def write_report(results, before, args):
              "marked `power=\"zero\"` (an optimisation, a demo) must fail with the term off (k = 0).",
              "In heightfield scenes `boundary` scales what the reparameterisation adds (the estimator",
              "minus the one with `heightfield_reparam=False`) and `interior` the rest.", "",
-             "Regenerate (all marked tests, with the edges of the passing range to "
-             f"{args.precision:g}; about an hour on 2 busy cores, mostly the first run of each test):", "",
-             "    cd tests/python && nice /path/to/python ../bench/test_power.py --bisect", "",
-             "The passing range is found by bisection, so a test that is not monotone in k could pass",
-             "at some k outside it. `before`: the same measurement before the tests were strengthened",
-             f"({os.path.relpath(args.before, ROOT)}).", "",
+             "Regenerate (every marked test at k = 0, 0.8, 1, 1.25; two to three hours on 2 cores busy",
+             "with other work, mostly the first run of each test, which fills the memo):", "",
+             "    cd tests/python && nice ../../.venv/bin/python ../bench/test_power.py [--notes ../../docs/reports/test_power_notes.md]", "",
+             "`-k <part of a node id>` measures some tests (results accumulate in docs/reports/test_power.json);",
+             "`--bisect` adds the edges of the passing range to "
+             f"{args.precision:g} (found by bisection: a test that is not monotone in k could pass",
+             "at some k outside it); `report` only rewrites this file. `before`: the same measurement before the",
+             f"tests were strengthened ({os.path.relpath(args.before, ROOT)}), where one was made.", "",
              "| test | term | k=0 | 0.8 | 1 | 1.25 | passing range | before | verdict | s |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     keys = [k for k in sorted(results) if not k.startswith("__")]
