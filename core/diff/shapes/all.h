@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include "core/diff/shapes/heightfield.h"
 #include "core/diff/shapes/mesh.h"
+#include "core/diff/shapes/sdfgrid.h"
 #include "core/diff/shapes/sphere.h"
 
 namespace limn {

@@ -13,11 +13,12 @@
 #include "core/geometry/parameter.h"
 #include "core/geometry/shapes/heightfield/heightfield.h"
 #include "core/geometry/shapes/mesh.h"
+#include "core/geometry/shapes/sdfgrid.h"
 #include "core/geometry/shapes/sphere.h"
 
 namespace limn {
 
-using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield>;
+using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield, SdfGrid>;
 
 // What a shape kind G implements (see Mesh for the documentation of each operation).
 template <typename G>
