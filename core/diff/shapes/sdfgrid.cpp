@@ -632,8 +632,9 @@ DiffVertex SurfaceDiff<SdfGrid>::ray_hit(const DiffContext& c, const SdfGrid& g,
   const SdfSample S = g.eval(v, s_val);
   const Vec3d dg = g.A_inv * Vec3d(d.x.v, d.y.v, d.z.v);
   const double den = glm::dot(S.grad, dg);
-  // One taped Newton step along the ray at the primal root: t = t0 - (f - f_primal) / (grad f . d).
-  const Var t = std::abs(den) > 0.0 ? Var(t0) - derivative_part(f) / Var(den) : Var(t0);
+  // One taped Newton step along the ray from the primal root: t = t0 - f / (grad f . d) (f = 0 up to
+  // rounding at the primal parameters; elsewhere the step follows the moved surface to first order).
+  const Var t = std::abs(den) > 0.0 ? Var(t0) - f / Var(den) : Var(t0);
   out.p = o + d * t;
   Vec3d n;
   if (!g.world_normal(S.grad, n)) {
