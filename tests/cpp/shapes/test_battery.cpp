@@ -539,9 +539,13 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
       // Beside x_b the line along w meets the shape on the occluder's side (-n_b) and misses it on
       // the other, near x_b: curved surfaces are met within sqrt(2 r delta) of x_b (delta: 16 ulps
       // of the unit-size coordinates; the radius: 3 sqrt(delta), which a mesh's neighbouring
-      // triangles reach only where x_b lies that close to a vertex).
-      const float delta = 1e-6f, radius = std::min(3e-3f, K::clearance(*scene, space.segments()[size_t(b.segment)], b));
-      if (radius < 1e-3f) continue;  // too close to where other parts of the surface begin (a mesh vertex) to tell
+      // triangles reach only where x_b lies that close to a vertex). An interior sample's Jacobian is
+      // the normal curvature kappa = 1 / r along w: flat directions (an SDF's trilinear patches) are
+      // met farther out, at 2 sqrt(2 delta / kappa), which the radius then covers, up to the clearance.
+      const BoundarySegment& seg = space.segments()[size_t(b.segment)];
+      const float reach = seg.part == BoundaryPart::Interior ? 2.0f * std::sqrt(2.0f * 1e-6f / b.jacobian) : 0.0f;
+      const float delta = 1e-6f, radius = std::min(std::max(3e-3f, reach), K::clearance(*scene, seg, b));
+      if (radius < std::max(1e-3f, reach)) continue;  // too close to where other parts of the surface begin (a mesh vertex) to tell
       ++checked;
       const bool inner = line_meets_shape_near(*scene, b.xb - delta * b.n_b, b.w, b.xb, radius);
       const bool outer = line_meets_shape_near(*scene, b.xb + delta * b.n_b, b.w, b.xb, radius);
