@@ -48,6 +48,18 @@ def silhouette_scene(n):
     return limn.load_dict(d), "obj.data"
 
 
+def lit_scene(n):
+    """The SDF ball under the point light, seen directly (no floor): interior + primary terms."""
+    with open(os.path.join(ROOT, "scenes", "validation", "sphere_occluder_point.json")) as f:
+        d = json.load(f)
+    del d["floor"], d["ball"]
+    d["sensor"]["to_world"]["look_at"]["target"] = [0.4, 0.2, 1.2]
+    d["sensor"]["fov"] = 20
+    d["blob"] = {"type": "sdfgrid", "data": ball(n), "to_world": [{"translate": [-0.5, -0.5, -0.5]}, {"translate": [0.4, 0.2, 1.2]}],
+                 "bsdf": {"type": "diffuse", "reflectance": 0.4}}
+    return limn.load_dict(d), "blob.data"
+
+
 def shadow(light, n):
     s = shadow_scene(light, n)
     return s, "blob.data"
@@ -63,14 +75,19 @@ def fd_agreement(lines):
               "Block (4 x 4 px) z-scores of the derivative image against central differences (eps 2e-3 on every",
               "grid value, 1024 spp per seed), 8 seeds each; tangent -1 + 0.5 N(0, 1) per grid value (the ball grows,",
               "unevenly). `on`: the term under test on; `off`: switched off (spp_primary = 0 or spp_boundary = 0).", "",
-              "| scene | grid | max abs z (on) | max abs z (off) | sum FD | sum on | time on (s) |", "|---|---|---|---|---|---|---|"]
+              "| scene | grid | max abs z (on) | max abs z (off) | sum FD +- s.e. | sum on +- s.e. | time on (s) |", "|---|---|---|---|---|---|---|"]
     seeds = 4 if QUICK else 8
     for label, make, kw_on, kw_off in [
         ("silhouette (primary)", silhouette_scene, dict(spp=128, spp_primary=128), dict(spp=128, spp_primary=0)),
         ("shadow, point light (indirect)", lambda n: shadow("point", n), dict(spp=64, spp_boundary=16), dict(spp=64, spp_boundary=0)),
         ("shadow, area light (indirect)", lambda n: shadow("area", n), dict(spp=64, spp_boundary=512), dict(spp=64, spp_boundary=0)),
+        ("shadow, area light (indirect), 8x samples", lambda n: shadow("area", n), dict(spp=64, spp_boundary=4096), dict(spp=64, spp_boundary=0)),
+        ("lit ball seen directly (interior + primary)", lit_scene, dict(spp=128, spp_primary=128, spp_boundary=16),
+         dict(spp=128, spp_primary=0, spp_boundary=16)),
     ]:
         for n in ((16,) if QUICK else (16, 32, 64)):
+            if "8x" in label and n != 64:
+                continue
             scene, name = make(n)
             scene.set_differentiable([name])
             t = tangent(scene, name, 3)
@@ -80,8 +97,9 @@ def fd_agreement(lines):
             t_on = (time.time() - t0) / seeds
             off = np.stack([quiet(scene.render_forward, {name: t}, seed=50 + k, **kw_off) for k in range(seeds)])
             z_on, z_off = block_z(on, fd), block_z(off, fd)
-            lines.append(f"| {label} | {n}^3 | {np.abs(z_on).max():.2f} | {np.abs(z_off).max():.1f} | {fd.mean(0).sum():.2f} | "
-                         f"{on.mean(0).sum():.2f} | {t_on:.2f} |")
+            se = lambda a: a.sum(axis=(1, 2, 3)).std(ddof=1) / np.sqrt(len(a))  # noqa: E731
+            lines.append(f"| {label} | {n}^3 | {np.abs(z_on).max():.2f} | {np.abs(z_off).max():.1f} | {fd.mean(0).sum():.2f} +- {se(fd):.2f} | "
+                         f"{on.mean(0).sum():.2f} +- {se(on):.2f} | {t_on:.2f} |")
             print(lines[-1], flush=True)
     lines.append("")
 

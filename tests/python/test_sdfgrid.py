@@ -193,6 +193,31 @@ def test_moving_sdf_shadow_against_finite_differences(light, spp_boundary):
     assert abs(on.mean(0).sum() - fd.mean(0).sum()) < 0.05 * abs(fd.mean(0).sum())
 
 
+def test_lit_sdf_seen_directly_against_finite_differences():
+    """The bumpy ball under the point light, seen directly: interior term (shading moves with the
+    surface) plus the primary term, whose crease curves carry both the outline and the shading
+    jumps across voxel faces. Before non-silhouette creases were checked against their probes
+    (core/diff/shapes/sdfgrid.cpp, probes_see_patches) the sum was 30 % high; see docs/derivatives.md
+    for what is still open here (terminator blocks of an exact sphere SDF)."""
+    with open(os.path.join(VALIDATION, "sphere_occluder_point.json")) as f:
+        d = json.load(f)
+    del d["floor"], d["ball"]
+    d["sensor"]["to_world"]["look_at"]["target"] = [0.4, 0.2, 1.2]
+    d["sensor"]["fov"] = 20
+    d["blob"] = {"type": "sdfgrid", "data": ball(16), "to_world": [{"translate": [-0.5, -0.5, -0.5]}, {"translate": [0.4, 0.2, 1.2]}],
+                 "bsdf": {"type": "diffuse", "reflectance": 0.4}}
+    scene = limn.load_dict(d)
+    name = "blob.data"
+    scene.set_differentiable([name])
+    t = random_tangent(scene, name, 3)
+    fd = np.stack([limn.fd(scene, {name: t}, eps=2e-3, spp=1024, seed=k, cache=False) for k in range(8)])
+    on = np.stack([quiet(scene.render_forward, {name: t}, spp=128, spp_primary=128, spp_boundary=16, seed=50 + k) for k in range(8)])
+    off = np.stack([quiet(scene.render_forward, {name: t}, spp=128, spp_primary=0, spp_boundary=16, seed=50 + k) for k in range(8)])
+    z_on, z_off = block_z(on, fd), block_z(off, fd)
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > 10, z_off
+
+
 def test_backward_matches_forward():
     scene = shadow_scene("area", n=10)
     name = "blob.data"
