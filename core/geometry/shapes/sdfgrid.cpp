@@ -207,6 +207,11 @@ size_t SdfGrid::update_voxels(bool all) {
     built_values = values;
     return voxel_count();
   }
+  // Many changed samples (an optimisation step moves every value): the parallel full rebuild is
+  // cheaper than the merge below (256^3, every value changed: 24 s merged, 3.5 s rebuilt).
+  size_t changed = 0;
+  for (size_t idx = 0; idx < values.size(); ++idx) changed += values[idx] != built_values[idx];
+  if (changed * 8 > values.size()) return update_voxels(true);
   // The voxels around each changed sample (up to 8).
   std::vector<uint32_t> dirty;
   for (size_t idx = 0; idx < values.size(); ++idx) {
