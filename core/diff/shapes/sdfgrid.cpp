@@ -405,15 +405,27 @@ class SdfProjector : public ShapeProjector {
     int along;
     face_of(m_g, m_space.segments()[size_t(seg->second)].local, f, along);
     const Vec3d base(f.i, f.j, f.k);
-    const double r = std::clamp(x[along] - base[along], 0.0, 1.0);
-    sdf::CreasePoint cp;
-    if (!sdf::crease_point(m_g, f, along, r, cp)) return std::nullopt;
-    const Vec3 xb = Vec3(m_g.world_from_grid(cp.g));
-    const Vec3d w = glm::normalize(Vec3d(xa) - Vec3d(xb));
-    Vec3d n_b, n_out;
-    double sin_phi;
-    if (!crease_silhouette(m_g, f, cp.g, cp.tangent, w, n_b, n_out, sin_phi)) return std::nullopt;
-    return finish_projection(m_space, seg->second, xa, xb, true, Vec3(w));
+    const double r0 = std::clamp(x[along] - base[along], 0.0, 1.0);
+    // The crease point at the crossing, else the nearest point of the crease (17 points along it)
+    // that is a silhouette from x_a: a crease is a silhouette over a stretch only, and a march
+    // that reaches the face beside that stretch would otherwise step back and forth across it.
+    auto at = [&](double r) -> std::optional<Projection> {
+      sdf::CreasePoint cp;
+      if (!sdf::crease_point(m_g, f, along, r, cp)) return std::nullopt;
+      const Vec3 xb = Vec3(m_g.world_from_grid(cp.g));
+      const Vec3d w = glm::normalize(Vec3d(xa) - Vec3d(xb));
+      Vec3d n_b, n_out;
+      double sin_phi;
+      if (!crease_silhouette(m_g, f, cp.g, cp.tangent, w, n_b, n_out, sin_phi)) return std::nullopt;
+      return finish_projection(m_space, seg->second, xa, xb, true, Vec3(w));
+    };
+    if (auto p = at(r0)) return p;
+    constexpr int kScan = 16;
+    for (int k = 1; k <= kScan; ++k)  // outwards from r0, nearest first
+      for (const double r : {r0 - double(k) / kScan, r0 + double(k) / kScan})
+        if (r >= 0.0 && r <= 1.0)
+          if (auto p = at(r)) return p;
+    return std::nullopt;
   }
 
   const SdfGrid& m_g;

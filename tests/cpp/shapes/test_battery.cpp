@@ -524,6 +524,7 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
   } else {
     const BoundarySpace space(*scene, params);
     const Projector projector(*scene, space);
+    if constexpr (std::is_same_v<typename K::G, SdfGrid>) sdf::reset_projection_stats();
     Pcg32 rng(5);
     int tried = 0, found = 0, checked = 0, silhouettes = 0;
     for (int i = 0; i < 600; ++i) {
@@ -553,6 +554,11 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
     }
     MESSAGE(std::string(K::G::kind_name) << ": " << found << " of " << tried << " projections found silhouettes; " << silhouettes << " of "
                                           << checked << " checkable verified");
+    if constexpr (std::is_same_v<typename K::G, SdfGrid>) {
+      const sdf::ProjectionStats st = sdf::projection_stats();
+      MESSAGE("sdfgrid projections: " << st.tried << " tried, " << st.interior << " onto patch contours, " << st.crease << " onto creases, "
+                                      << st.fallback << " fell back to the hit, " << st.failed << " failed");
+    }
     CHECK(found > tried / 2);
     // Mesh projections put x_b at the point of the edge nearest to the hit, which is often an end
     // of the edge (1e-4 of its length inside): most are then too near a vertex to check this way.
