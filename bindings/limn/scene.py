@@ -194,6 +194,9 @@ class Scene:
           which the grid and the octree hold at the defensive density only; the coarser histograms
           cover the GGX lobe's long tails next to the cells the projections filled (0: off;
           docs/reports/projective/README.md).
+        - ``boundary_parts``: which parts of the indirect term's Eq. 4 to sample, ``"both"``,
+          ``"perimeter"`` (mesh edges, SDF creases) or ``"interior"`` (spheres, SDF patches): one part
+          alone validates it against finite differences (tests/python/test_sdfgrid.py).
         - ``boundary_sampler``: the indirect term's points of the boundary sample space,
           ``"stratified"`` (the first coordinate in one stratum per sample, the other two
           from Owen-scrambled Sobol points, which the guides map axis by axis, so every region gets

@@ -125,6 +125,7 @@ const std::vector<DiffOptionField>& diff_option_fields() {
       term_count("spp_primary", [](DiffOptions& o) -> int& { return o.spp_primary; }),
       term_count("spp_boundary", [](DiffOptions& o) -> int& { return o.spp_boundary; }),
       field<std::string>("boundary_sampler", [](DiffOptions& o) -> std::string& { return o.boundary_sampler; }),
+      field<std::string>("boundary_parts", [](DiffOptions& o) -> std::string& { return o.boundary_parts; }),
       {"seed", [](DiffOptions& o, const py::handle& v) {
          const long long seed = v.cast<long long>();
          if (seed < 0) throw std::invalid_argument("seed must be >= 0 (got " + std::to_string(seed) + ")");

@@ -39,6 +39,8 @@ void validate_diff_options(const Scene& scene, const DiffParams& params, const D
   require(opt.guiding == "auto" || opt.guiding == "none" || opt.guiding == "grid" || opt.guiding == "octree", scene, "guiding",
           "'auto', 'none', 'grid' or 'octree'", opt.guiding);
   parse_seed_segments(opt.project_seed, scene.source);
+  require(opt.boundary_parts == "both" || opt.boundary_parts == "perimeter" || opt.boundary_parts == "interior", scene, "boundary_parts",
+          "'both', 'perimeter' or 'interior'", opt.boundary_parts);
   require(opt.grid_resolution >= 1, scene, "grid_resolution", ">= 1", opt.grid_resolution);
   const std::array<int, 3> cells = grid_cells(opt);
   if (opt.guiding != "none" && size_t(cells[0]) * cells[1] * cells[2] > BoundaryGrid::kMaxCells)

@@ -60,6 +60,9 @@ struct DiffOptions {
   int spp_boundary = -1;  // indirect boundary samples, per pixel on average (-1: spp; 0: off)
   // Indirect boundary: the call's points of [0,1)^3 "independent" or "stratified" (core/math/sequence.h).
   std::string boundary_sampler = "stratified";
+  // Indirect boundary: which parts of Eq. 4 to sample, "both", "perimeter" (edges, creases) or
+  // "interior" (curved surfaces); one part alone validates it against finite differences.
+  std::string boundary_parts = "both";
   // Indirect boundary: "auto" (the projective grid, or the octree from kAutoOctreeSpp samples per
   // pixel), "none" (uniform), "grid" or "octree" (core/guiding/).
   std::string guiding = "auto";

@@ -130,7 +130,7 @@ std::vector<float> moving_geometry(const Scene& scene, const DiffParams& params,
 CallGuide guide_for_call(const Scene& scene, const DiffParams& params, const IndirectBoundary& ib, const DiffOptions& opt) {
   CallGuide terms;
   GuideCache* cache = opt.guide_refresh > 0 ? opt.guide_cache : nullptr;
-  const std::string key = opt.guiding + "|" + (opt.projective ? "p" : "u") + "|" + opt.project_seed + "|" +
+  const std::string key = opt.guiding + "|" + (opt.projective ? "p" : "u") + "|" + opt.project_seed + "|" + opt.boundary_parts + "|" +
                           std::to_string(opt.grid_resolution) + "," + std::to_string(opt.grid_octaves) + "|" + std::to_string(opt.guiding_spp) + "|" +
                           std::to_string(seeds_per_pixel(opt)) + "|" +
                           std::to_string(opt.octree.slices) + "," + std::to_string(opt.octree.max_depth) + "," +

@@ -100,6 +100,7 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
     for (const auto& [name, count] : indirect->space().segment_counts())
       segments += (segments.empty() ? "" : " and ") + std::to_string(count) + " " + name;
     const CallGuide* g = terms && terms->guide.guide ? &terms->guide : nullptr;
+    if (opt.boundary_parts != "both") segments += " (" + opt.boundary_parts + " part of Eq. 4 only: boundary_parts)";
     s.push_back("indirect boundary: " + std::to_string(opt.spp_boundary) + " samples per pixel over " + segments + " (" +
                 std::to_string(indirect->space().static_count()) + " of them static: they count where a moving surface ends the segment), " +
                 (g ? std::string(opt.guiding_auto ? "guiding auto (" + std::to_string(opt.spp_boundary) + " samples per pixel: " +
@@ -223,7 +224,8 @@ BoundaryTerms run_boundary_terms(const Scene& scene, const DiffParams& params, c
       });
   }
   if (opt.spp_boundary > 0) {
-    terms.indirect = std::make_unique<IndirectBoundary>(scene, params, effective_max_depth(scene, opt.max_depth));
+    terms.indirect = std::make_unique<IndirectBoundary>(scene, params, effective_max_depth(scene, opt.max_depth), opt.boundary_parts != "interior",
+                                                        opt.boundary_parts != "perimeter");
     const uint64_t n = samples_for(scene, opt.spp_boundary);
     if (!terms.indirect->empty() && opt.guiding != "none") terms.guide = guide_for_call(scene, params, *terms.indirect, opt);
     const BoundaryPoints point(opt, n, kIndirectTag);

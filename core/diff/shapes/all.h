@@ -6,6 +6,7 @@
 #include "core/diff/shapes/disk.h"
 #include "core/diff/shapes/heightfield.h"
 #include "core/diff/shapes/mesh.h"
+#include "core/diff/shapes/sdfgrid.h"
 #include "core/diff/shapes/sphere.h"
 
 namespace limn {

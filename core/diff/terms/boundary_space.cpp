@@ -6,7 +6,8 @@
 
 namespace limn {
 
-BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_scene(scene), m_params(params) {
+BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params, bool perimeter, bool interior)
+    : m_scene(scene), m_params(params) {
   // Moving shapes first, then static ones: a static silhouette matters too when a segment grazing
   // it ends on a moving surface (a receiver moving under a static occluder).
   std::vector<int> order = params.moving_shapes();
@@ -16,6 +17,7 @@ BoundarySpace::BoundarySpace(const Scene& scene, const DiffParams& params) : m_s
   double moving_measure = 0.0, static_measure = 0.0;
   for (const BoundaryPart part : {BoundaryPart::Perimeter, BoundaryPart::Interior})
     for (size_t oi = 0; oi < order.size(); ++oi) {
+      if (!(part == BoundaryPart::Perimeter ? perimeter : interior)) continue;
       const int si = order[oi];
       const bool moving = oi < moving_count;
       if (!has_group<BoundarySegments>(scene.shapes[si])) {

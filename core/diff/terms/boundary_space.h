@@ -24,7 +24,8 @@ namespace limn {
 class BoundarySpace final : public SegmentSpace {
  public:
   // Throws std::invalid_argument naming a moving shape whose kind has no boundary segments.
-  BoundarySpace(const Scene& scene, const DiffParams& params);
+  // `perimeter` / `interior`: whether Eq. 4's part takes part (DiffOptions::boundary_parts).
+  BoundarySpace(const Scene& scene, const DiffParams& params, bool perimeter = true, bool interior = true);
 
   bool empty() const { return m_segments.empty(); }
   size_t static_count() const;  // segments of shapes that do not move

@@ -43,8 +43,8 @@ bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const Sur
 
 }  // namespace
 
-IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params, int max_depth)
-    : m_scene(scene), m_params(params), m_space(scene, params), m_max_depth(max_depth) {
+IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params, int max_depth, bool perimeter, bool interior)
+    : m_scene(scene), m_params(params), m_space(scene, params, perimeter, interior), m_max_depth(max_depth) {
   for (size_t i = 0; i < scene.emitters.size(); ++i)
     if (scene.emitters[i].is_delta()) m_delta_lights.push_back(int(i));
 }

@@ -27,7 +27,7 @@ namespace limn {
 
 class IndirectBoundary {
  public:
-  IndirectBoundary(const Scene& scene, const DiffParams& params, int max_depth);
+  IndirectBoundary(const Scene& scene, const DiffParams& params, int max_depth, bool perimeter = true, bool interior = true);
 
   bool empty() const { return m_space.empty(); }
   const BoundarySpace& space() const { return m_space; }

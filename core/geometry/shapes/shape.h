@@ -14,11 +14,12 @@
 #include "core/geometry/shapes/disk.h"
 #include "core/geometry/shapes/heightfield/heightfield.h"
 #include "core/geometry/shapes/mesh.h"
+#include "core/geometry/shapes/sdfgrid.h"
 #include "core/geometry/shapes/sphere.h"
 
 namespace limn {
 
-using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield, Disk>;
+using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield, Disk, SdfGrid>;
 
 // What a shape kind G implements (see Mesh for the documentation of each operation).
 template <typename G>

@@ -13,6 +13,7 @@ const std::map<std::string, ShapeLoader>& shape_kinds() {
       {"obj", load_mesh_shape},     {"ply", load_mesh_shape},  {"mesh", load_mesh_shape},
       {"rectangle", load_mesh_shape}, {"cube", load_mesh_shape}, {"sphere", load_sphere},
       {"heightfield", load_heightfield}, {"disk", load_disk},
+      {"sdfgrid", load_sdfgrid},
   };
   return table;
 }

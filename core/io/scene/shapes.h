@@ -35,6 +35,9 @@ ShapeGeometry load_disk(const Props& p, const std::string& type, const Transform
 // heightfield (heightfield.cpp).
 ShapeGeometry load_heightfield(const Props& p, const std::string& type, const Transform& to_world);
 
+// sdfgrid (sdfgrid.cpp).
+ShapeGeometry load_sdfgrid(const Props& p, const std::string& type, const Transform& to_world);
+
 void load_shape(Context& ctx, const json& j, const std::string& id);
 
 }  // namespace limn::io_detail

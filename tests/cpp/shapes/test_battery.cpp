@@ -51,11 +51,11 @@ struct MeshKind {
   }
   static inline const std::vector<std::string> params = {"shape.vertex_positions", "shape.to_world.translation"};
   // Two material points next to sp (for the area Jacobian's finite difference).
-  static std::array<SurfacePoint, 2> neighbours(SurfacePoint sp, float h) {
+  static std::array<SurfacePoint, 3> neighbours(const Scene&, SurfacePoint sp, float h) {
     SurfacePoint a = sp, b = sp;
     a.bary.x += sp.bary.x > 0.5f ? -h : h;
     b.bary.y += sp.bary.y > 0.5f ? -h : h;
-    return {a, b};
+    return {sp, a, b};
   }
   // How far from x_b only the segment's own surface lies: the edge's two triangles, up to its ends
   // (around a vertex, other triangles may lie on either side of the edge's silhouette plane).
@@ -87,12 +87,12 @@ struct SphereKind {
   using G = Sphere;
   static std::unique_ptr<Scene> scene() { return scene_with_shape(R"({"type": "sphere", "center": [0.1, -0.05, 0.2], "radius": 0.7})"); }
   static inline const std::vector<std::string> params = {"shape.center", "shape.radius", "shape.to_world.translation"};
-  static std::array<SurfacePoint, 2> neighbours(SurfacePoint sp, float h) {
+  static std::array<SurfacePoint, 3> neighbours(const Scene&, SurfacePoint sp, float h) {
     const Frame f(sp.n);
     SurfacePoint a = sp, b = sp;
     a.n = glm::normalize(sp.n + h * f.s);
     b.n = glm::normalize(sp.n + h * f.t);
-    return {a, b};
+    return {sp, a, b};
   }
   static float clearance(const Scene&, const BoundarySegment&, const BoundaryPoint&) { return kInfinity; }
   static std::optional<double> reference_hit(const Sphere& s, const Ray& r) {  // closed form
@@ -154,11 +154,11 @@ struct HeightfieldKind {
                             R"(, "to_world": {"rotate": {"axis": [0, 0, 1], "angle": 20}}})");
   }
   static inline const std::vector<std::string> params = {"shape.heights", "shape.to_world.translation"};
-  static std::array<SurfacePoint, 2> neighbours(SurfacePoint sp, float h) {  // grid coordinates, 11 cells across
+  static std::array<SurfacePoint, 3> neighbours(const Scene&, SurfacePoint sp, float h) {  // grid coordinates, 11 cells across
     SurfacePoint a = sp, b = sp;
     a.bary.x += sp.bary.x > 5.5f ? -11.0f * h : 11.0f * h;
     b.bary.y += sp.bary.y > 5.5f ? -11.0f * h : 11.0f * h;
-    return {a, b};
+    return {sp, a, b};
   }
   static std::optional<double> reference_hit(const Heightfield& h, const Ray& r) {
     // Dense marching of z_ray - z_surface in the local frame, then bisection at the first sign change.
@@ -187,6 +187,145 @@ struct HeightfieldKind {
         return 0.5 * (a + b);
       }
       t0 = t1, g0 = g1, in0 = in1;
+    }
+    return std::nullopt;
+  }
+};
+
+// A bumpy ball (radius about 0.7) sampled on 14^3 corners over a box rotated about z and scaled
+// unevenly (A is not a multiple of a rotation), values a signed distance up to the bumps.
+struct SdfKind {
+  using G = SdfGrid;
+  static constexpr int N = 14;
+  static inline const Vec3d kScale{2.0, 1.9, 2.1};
+  static constexpr double kAngle = 20.0;  // degrees about z
+  static Vec3d world_of_local(const Vec3d& l) {
+    const Vec3d q = kScale * (l - Vec3d(0.5));
+    const double c = std::cos(glm::radians(kAngle)), s = std::sin(glm::radians(kAngle));
+    return Vec3d(c * q.x - s * q.y, s * q.x + c * q.y, q.z);
+  }
+  static Vec3d local_of_world(const Vec3d& p) {
+    const double c = std::cos(glm::radians(kAngle)), s = std::sin(glm::radians(kAngle));
+    return Vec3d(c * p.x + s * p.y, -s * p.x + c * p.y, p.z) / kScale + Vec3d(0.5);
+  }
+  static std::unique_ptr<Scene> scene() {
+    std::string data = "[";
+    for (int z = 0; z < N; ++z) {
+      data += z ? ",[" : "[";
+      for (int y = 0; y < N; ++y) {
+        data += y ? ",[" : "[";
+        for (int x = 0; x < N; ++x) {
+          const Vec3d p = world_of_local(Vec3d(x, y, z) / double(N - 1));
+          const double f = glm::length(p - Vec3d(0.05, -0.03, 0.1)) - 0.7 + 0.06 * std::sin(3.0 * p.x) * std::cos(2.0 * p.y + 0.5 * p.z);
+          data += (x ? "," : "") + std::to_string(f);
+        }
+        data += "]";
+      }
+      data += "]";
+    }
+    data += "]";
+    return scene_with_shape(R"({"type": "sdfgrid", "data": )" + data +
+                            R"(, "to_world": [{"translate": [-0.5, -0.5, -0.5]}, {"scale": [2.0, 1.9, 2.1]}, {"rotate": {"axis": [0, 0, 1], "angle": 20}}]})");
+  }
+  static inline const std::vector<std::string> params = {"shape.data", "shape.to_world.translation"};
+  // Two material points next to sp on the primal surface: steps of h (local units) along two
+  // tangents, pulled back onto the zero set along the gradient (double Newton).
+  static std::array<SurfacePoint, 3> neighbours(const Scene& scene, SurfacePoint sp, float h) {
+    const SdfGrid& g = test::geometry<SdfGrid>(scene, 0);
+    const Vec3d l0 = g.local_of(sp.uv, sp.bary);
+    const Vec3d x0 = g.grid_of_local(l0);
+    Vec3d s;
+    const uint32_t v = g.locate(x0, s);
+    const Vec3d n = glm::normalize(g.eval(v, s).grad);
+    const Vec3d t1 = glm::normalize(glm::cross(n, std::abs(n.x) < 0.8 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0))), t2 = glm::cross(n, t1);
+    std::array<SurfacePoint, 3> out{sp, sp, sp};
+    const double step = 0.5 * h * (g.nx - 1);  // h / 2 local units: the finite triangle's error is O(h) (measured: h converges, 2 h does not)
+    for (int k = 0; k < 3; ++k) {
+      Vec3d x = x0 + (k == 0 ? Vec3d(0.0) : step * (k == 1 ? t1 : t2));
+      for (int it = 0; it < 20; ++it) {
+        const SdfSample S = g.eval(v, x - g.voxel_origin(v));
+        x -= S.f / glm::dot(S.grad, S.grad) * S.grad;
+      }
+      // Of the floats within 3 ulps of each local coordinate, the one nearest the zero set: plain
+      // rounding leaves a material point up to an ulp (1e-7 of the grid) off the surface, which the
+      // material triangle (h = 1e-5) magnifies into a percent of the area Jacobian's derivative.
+      const Vec3 l(float(x.x / (g.nx - 1)), float(x.y / (g.ny - 1)), float(x.z / (g.nz - 1)));
+      Vec3 best = l;
+      double best_f = kInfinity;
+      auto ulps = [](float f, int n) {
+        for (; n > 0; --n) f = std::nextafter(f, 2.0f);
+        for (; n < 0; ++n) f = std::nextafter(f, -1.0f);
+        return f;
+      };
+      for (int dz = -3; dz <= 3; ++dz)
+        for (int dy = -3; dy <= 3; ++dy)
+          for (int dx = -3; dx <= 3; ++dx) {
+            const Vec3 c(ulps(l.x, dx), ulps(l.y, dy), ulps(l.z, dz));
+            const double f = std::abs(g.eval(v, g.grid_of_local(Vec3d(c)) - g.voxel_origin(v)).f);
+            if (f < best_f) best_f = f, best = c;
+          }
+      out[size_t(k)].uv = Vec2(best.x, best.y);
+      out[size_t(k)].bary = Vec2(best.z, 0.0f);
+    }
+    return out;
+  }
+  // How far from x_b only the segment's own patch lies: x_b's distance to the faces of its voxel
+  // (interior) or to the edges of its face (perimeter), in world units (the smallest voxel edge).
+  static float clearance(const Scene& scene, const BoundarySegment& s, const BoundaryPoint& p) {
+    const SdfGrid& g = test::geometry<SdfGrid>(scene, size_t(s.shape));
+    const Vec3d x = g.grid_from_world(Vec3d(p.xb));
+    const double edge = std::min({glm::length(g.A[0]), glm::length(g.A[1]), glm::length(g.A[2])});
+    double d = kInfinity;
+    if (s.part == BoundaryPart::Interior) {
+      const Vec3d lo = g.voxel_origin(uint32_t(s.local / 3));
+      for (int a = 0; a < 3; ++a) d = std::min({d, x[a] - lo[a], lo[a] + 1.0 - x[a]});
+    } else {
+      const sdf::Face f = sdf::Face::of_code(g, s.local / 3);  // perimeter code: face * 3 + axis along
+      const Vec3d base(f.i, f.j, f.k);
+      for (int a = 0; a < 3; ++a)
+        if (a != f.d) d = std::min({d, x[a] - base[a], base[a] + 1.0 - x[a]});
+    }
+    return float(std::max(d, 0.0) * edge);
+  }
+  // Trilinear interpolation written as nested lerps (not SdfGrid's monomial form), marched densely
+  // along the ray in the unit cube, then bisection at the first sign change.
+  static std::optional<double> reference_hit(const SdfGrid& g, const Ray& r) {
+    auto value = [&](const Vec3d& l) {
+      const Vec3d x = l * Vec3d(g.nx - 1, g.ny - 1, g.nz - 1);
+      const int i = std::clamp(int(x.x), 0, g.nx - 2), j = std::clamp(int(x.y), 0, g.ny - 2), k = std::clamp(int(x.z), 0, g.nz - 2);
+      const double fx = x.x - i, fy = x.y - j, fz = x.z - k;
+      auto at = [&](int a, int b, int c) { return double(g.values[(size_t(k + c) * g.ny + (j + b)) * g.nx + (i + a)]); };
+      auto lerp = [](double a, double b, double t) { return a + (b - a) * t; };
+      return lerp(lerp(lerp(at(0, 0, 0), at(1, 0, 0), fx), lerp(at(0, 1, 0), at(1, 1, 0), fx), fy),
+                  lerp(lerp(at(0, 0, 1), at(1, 0, 1), fx), lerp(at(0, 1, 1), at(1, 1, 1), fx), fy), fz);
+    };
+    const Vec3d o = local_of_world(Vec3d(r.o)), d = local_of_world(Vec3d(r.o) + Vec3d(r.d)) - o;
+    // Clip to the unit cube.
+    double t0 = r.tmin, t1 = std::min(double(r.tmax), 20.0);
+    for (int a = 0; a < 3; ++a) {
+      if (d[a] == 0.0) {
+        if (o[a] < 0.0 || o[a] > 1.0) return std::nullopt;
+        continue;
+      }
+      double ta = -o[a] / d[a], tb = (1.0 - o[a]) / d[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    if (!(t0 < t1)) return std::nullopt;
+    const int steps = 20000;
+    double ta = t0, fa = value(o + ta * d);
+    for (int i = 1; i <= steps; ++i) {
+      const double tb = t0 + (t1 - t0) * i / steps, fb = value(o + tb * d);
+      if ((fa > 0) != (fb > 0)) {
+        double a = ta, b = tb;
+        for (int k = 0; k < 60; ++k) {
+          const double m = 0.5 * (a + b);
+          ((value(o + m * d) > 0) == (fa > 0) ? a : b) = m;
+        }
+        return 0.5 * (a + b);
+      }
+      ta = tb, fa = fb;
     }
     return std::nullopt;
   }
@@ -251,7 +390,7 @@ bool line_meets_shape_near(const Scene& scene, const Vec3& p, const Vec3& w, con
 }  // namespace
 
 TEST_CASE_TEMPLATE("shape battery: intersection agrees with an independent answer, and rays leaving a hit do not re-hit it", K,
-                   MeshKind, SphereKind, HeightfieldKind, DiskKind) {
+                   MeshKind, SphereKind, HeightfieldKind, DiskKind, SdfKind) {
   auto scene = K::scene();
   const auto& g = geometry_of<K>(*scene);
   Pcg32 rng(7);
@@ -290,7 +429,7 @@ TEST_CASE_TEMPLATE("shape battery: intersection agrees with an independent answe
 }
 
 TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree with finite differences", K, MeshKind, SphereKind,
-                   HeightfieldKind, DiskKind) {
+                   HeightfieldKind, DiskKind, SdfKind) {
   auto scene = K::scene();
   for (const std::string& name : K::params) {
     CAPTURE(name);
@@ -306,6 +445,9 @@ TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree 
       SurfaceInteraction si;
       if (scene->intersect(ray, si) && std::abs(glm::dot(si.ng, ray.d)) > 0.2f) hits.push_back({ray, si});
     }
+    // Two material points next to each hit, chosen at theta (fixed while theta moves).
+    std::vector<std::array<SurfacePoint, 3>> near;
+    for (const auto& h : hits) near.push_back(K::neighbours(*scene, SurfacePoint::of(h.second), 1e-5f));  // small: the area element varies over the triangle at O(h)
     // Each routine's scalars at the current theta, with their tape derivatives along the tangent.
     auto evaluate = [&](int which, const std::pair<Ray, SurfaceInteraction>& h, std::vector<double>& value, std::vector<double>& deriv) {
       ad::Tape::current().clear();
@@ -320,8 +462,8 @@ TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree 
         s = scalars(attach(c, sp), true);
         // The area Jacobian is relative to the primal area, so its value is 1 at every theta: its
         // finite difference comes from the area of a small material triangle around the point.
-        const auto nb = K::neighbours(sp, 1e-5f);  // small: the area element varies over the triangle at O(h)
-        const VV p0 = attached_position(c, sp), p1 = attached_position(c, nb[0]), p2 = attached_position(c, nb[1]);
+        const auto& nb = near[size_t(&h - hits.data())];
+        const VV p0 = attached_position(c, nb[0]), p1 = attached_position(c, nb[1]), p2 = attached_position(c, nb[2]);
         s.push_back(length(cross(p1 - p0, p2 - p0)));
       } else {
         const VV o(Var(h.first.o.x), Var(h.first.o.y), Var(h.first.o.z)), d(Var(h.first.d.x), Var(h.first.d.y), Var(h.first.d.z));
@@ -367,7 +509,7 @@ TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree 
 }
 
 TEST_CASE_TEMPLATE("shape battery: boundary samples invert exactly and E[1/pdf] is the segments' measure", K, MeshKind, SphereKind,
-                   HeightfieldKind, DiskKind) {
+                   HeightfieldKind, DiskKind, SdfKind) {
   auto scene = K::scene();
   const DiffParams params(*scene, {K::params.front()});
   if constexpr (is_unsupported<BoundarySegments<typename K::G>>) {
@@ -407,7 +549,7 @@ TEST_CASE_TEMPLATE("shape battery: boundary samples invert exactly and E[1/pdf] 
   }
 }
 
-TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, MeshKind, SphereKind, HeightfieldKind, DiskKind) {
+TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, MeshKind, SphereKind, HeightfieldKind, DiskKind, SdfKind) {
   auto scene = K::scene();
   const DiffParams params(*scene, {K::params.front()});
   if constexpr (is_unsupported<BoundarySegments<typename K::G>>) {
@@ -415,6 +557,7 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
   } else {
     const BoundarySpace space(*scene, params);
     const Projector projector(*scene, space);
+    if constexpr (std::is_same_v<typename K::G, SdfGrid>) sdf::reset_projection_stats();
     Pcg32 rng(5);
     int tried = 0, found = 0, checked = 0, silhouettes = 0;
     for (int i = 0; i < 600; ++i) {
@@ -430,9 +573,13 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
       // Beside x_b the line along w meets the shape on the occluder's side (-n_b) and misses it on
       // the other, near x_b: curved surfaces are met within sqrt(2 r delta) of x_b (delta: 16 ulps
       // of the unit-size coordinates; the radius: 3 sqrt(delta), which a mesh's neighbouring
-      // triangles reach only where x_b lies that close to a vertex).
-      const float delta = 1e-6f, radius = std::min(3e-3f, K::clearance(*scene, space.segments()[size_t(b.segment)], b));
-      if (radius < 1e-3f) continue;  // too close to where other parts of the surface begin (a mesh vertex) to tell
+      // triangles reach only where x_b lies that close to a vertex). An interior sample's Jacobian is
+      // the normal curvature kappa = 1 / r along w: flat directions (an SDF's trilinear patches) are
+      // met farther out, at 2 sqrt(2 delta / kappa), which the radius then covers, up to the clearance.
+      const BoundarySegment& seg = space.segments()[size_t(b.segment)];
+      const float reach = seg.part == BoundaryPart::Interior ? 2.0f * std::sqrt(2.0f * 1e-6f / b.jacobian) : 0.0f;
+      const float delta = 1e-6f, radius = std::min(std::max(3e-3f, reach), K::clearance(*scene, seg, b));
+      if (radius < std::max(1e-3f, reach)) continue;  // too close to where other parts of the surface begin (a mesh vertex) to tell
       ++checked;
       const bool inner = line_meets_shape_near(*scene, b.xb - delta * b.n_b, b.w, b.xb, radius);
       const bool outer = line_meets_shape_near(*scene, b.xb + delta * b.n_b, b.w, b.xb, radius);
@@ -440,6 +587,11 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
     }
     MESSAGE(std::string(K::G::kind_name) << ": " << found << " of " << tried << " projections found silhouettes; " << silhouettes << " of "
                                           << checked << " checkable verified");
+    if constexpr (std::is_same_v<typename K::G, SdfGrid>) {
+      const sdf::ProjectionStats st = sdf::projection_stats();
+      MESSAGE("sdfgrid projections: " << st.tried << " tried, " << st.interior << " onto patch contours, " << st.crease << " onto creases, "
+                                      << st.fallback << " fell back to the hit, " << st.failed << " failed");
+    }
     CHECK(found > tried / 2);
     // Mesh projections put x_b at the point of the edge nearest to the hit, which is often an end
     // of the edge (1e-4 of its length inside): most are then too near a vertex to check this way.
@@ -449,7 +601,7 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
 }
 
 TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when bad, and reach the acceleration structure", K, MeshKind,
-                   SphereKind, HeightfieldKind, DiskKind) {
+                   SphereKind, HeightfieldKind, DiskKind, SdfKind) {
   auto scene = K::scene();
   // From above and in front (a heightfield is open below), at the shape's middle.
   const Ray probe{Vec3(0.05f, -2.2f, 1.6f), glm::normalize(Vec3(0.0f, 0.0f, 0.15f) - Vec3(0.05f, -2.2f, 1.6f)), 0.0f, kInfinity};
@@ -479,6 +631,7 @@ TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when ba
     std::vector<double> grow(base.size(), 0.0);
     for (size_t i = 0; i < base.size(); ++i) grow[i] = name.ends_with("translation") || name.ends_with("center") ? (i % 3 == 1 ? -1.0 : 0.0)
                                                     : name.ends_with("vertex_positions")                         ? double(base[i]) * 0.2
+                                                    : name.ends_with(".data")                                    ? -0.2  // f < 0 inside
                                                                                                                  : 0.2;
     set_values(*scene, name, base, grow, 0.5);
     SurfaceInteraction after;
