@@ -57,6 +57,10 @@ struct CameraSilhouettes<SdfGrid> {
                      uint64_t& skipped);
   static bool point(const DiffContext& c, const SdfGrid& g, const SilhouetteCurve& curve, float u, const ad::V3<double>& eye,
                     ad::V3<ad::Var>& P, ad::V3<double>& dP, double& pdf_param);
+  // None: both sides are shaded by probe rays, which the crease test (probes_see_patches) checks.
+  static void sides(const Scene&, const SdfGrid&, const SilhouetteCurve&, const Vec3&, const ad::V3<double>&, CurveSides& out) {
+    out.count = 0;
+  }
 };
 
 // ---- helpers shared with the tests ---------------------------------------------------------------

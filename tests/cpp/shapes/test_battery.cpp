@@ -112,11 +112,11 @@ struct DiskKind {
                                                             {"translate": [0.05, -0.1, 0.1]}]})");
   }
   static inline const std::vector<std::string> params = {"shape.radius", "shape.to_world.translation"};
-  static std::array<SurfacePoint, 2> neighbours(SurfacePoint sp, float h) {  // unit-disk coordinates
+  static std::array<SurfacePoint, 3> neighbours(const Scene&, SurfacePoint sp, float h) {  // unit-disk coordinates
     SurfacePoint a = sp, b = sp;
     a.bary.x += sp.bary.x > 0.0f ? -h : h;
     b.bary.y += sp.bary.y > 0.0f ? -h : h;
-    return {a, b};
+    return {sp, a, b};
   }
   static float clearance(const Scene&, const BoundarySegment&, const BoundaryPoint&) { return kInfinity; }
   static std::optional<double> reference_hit(const Disk& d, const Ray& r) {
