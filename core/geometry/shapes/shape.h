@@ -11,13 +11,14 @@
 #include <string>
 #include <variant>
 #include "core/geometry/parameter.h"
+#include "core/geometry/shapes/curve.h"
 #include "core/geometry/shapes/heightfield/heightfield.h"
 #include "core/geometry/shapes/mesh.h"
 #include "core/geometry/shapes/sphere.h"
 
 namespace limn {
 
-using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield>;
+using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield, BSplineCurve>;
 
 // What a shape kind G implements (see Mesh for the documentation of each operation).
 template <typename G>
@@ -51,7 +52,7 @@ static_assert(all_shape_kinds(static_cast<const ShapeGeometry*>(nullptr)), "ever
 
 struct Shape {
   std::string id;          // unique name in the scene (the dictionary key in the scene description)
-  std::string type;        // scene-format type it was created from: obj, ply, mesh, rectangle, cube, sphere, heightfield
+  std::string type;        // scene-format type it was created from: obj, ply, mesh, rectangle, cube, sphere, heightfield, bsplinecurve
   ShapeGeometry geometry;
   int bsdf = -1;           // index into Scene::bsdfs
   int emitter = -1;        // index into Scene::emitters (an area emitter), or -1

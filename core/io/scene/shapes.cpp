@@ -9,7 +9,7 @@ const std::map<std::string, ShapeLoader>& shape_kinds() {
   static const std::map<std::string, ShapeLoader> table = {
       {"obj", load_mesh_shape},     {"ply", load_mesh_shape},  {"mesh", load_mesh_shape},
       {"rectangle", load_mesh_shape}, {"cube", load_mesh_shape}, {"sphere", load_sphere},
-      {"heightfield", load_heightfield},
+      {"heightfield", load_heightfield}, {"bsplinecurve", load_bsplinecurve},
   };
   return table;
 }

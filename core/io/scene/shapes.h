@@ -22,6 +22,8 @@ ShapeGeometry load_mesh_shape(const Props& p, const std::string& type, const Tra
 ShapeGeometry load_sphere(const Props& p, const std::string& type, const Transform& to_world);
 // heightfield (heightfield.cpp).
 ShapeGeometry load_heightfield(const Props& p, const std::string& type, const Transform& to_world);
+// bsplinecurve (curve.cpp).
+ShapeGeometry load_bsplinecurve(const Props& p, const std::string& type, const Transform& to_world);
 
 void load_shape(Context& ctx, const json& j, const std::string& id);
 
