@@ -38,10 +38,17 @@ SpanTape span_tape(const DiffContext& ctx, const BSplineCurve& g, int shape, siz
   return st;
 }
 
-// rho on the tape: rho0 made perpendicular to the moved unit tangent T.
-VV radial_tape(const VV& T, const Vec3d& rho0) {
-  const VV r0 = constant(rho0);
-  return normalize(r0 - T * dot(r0, T));
+// rho on the tape, as the primal frame computes it (BSplineCurve::frame): the rest radial
+// direction turned by the minimal rotation from the rest tangent to the moved unit tangent T.
+// rho0 is the primal rho (at T0); the rest one is its inverse rotation.
+VV radial_tape(const BSplineCurve& g, size_t span, double t, const VV& T, const Vec3d& rho0) {
+  Vec3d t_rest, n1_rest;
+  g.rest_frame(span, t, t_rest, n1_rest);
+  const Vec3d T0 = glm::normalize(g.eval(span, t).c1);
+  const Vec3d rho_rest = rotate_min(T0, t_rest, rho0);
+  // rotate_min(a, b, x) = x - (a + b) ((a + b) . x) / (1 + a . b) + 2 (a . x) b, with b = T on the tape.
+  const VV a = constant(t_rest), x = constant(rho_rest), ab = a + T;
+  return x - ab * (dot(ab, x) / (Var(1.0) + dot(a, T))) + T * Var(2.0 * glm::dot(t_rest, rho_rest));
 }
 
 // ---- boundary points ------------------------------------------------------------------------------
@@ -191,7 +198,7 @@ void curve_point(const DiffContext& c, int shape, uint32_t i, VV& p, Var& r) {
 
 VV curve_position(const DiffContext& c, const BSplineCurve& g, int shape, size_t span, double t, const Vec3d& rho0) {
   const SpanTape st = span_tape(c, g, shape, span, t);
-  return st.c + radial_tape(normalize(st.c1), rho0) * st.r;
+  return st.c + radial_tape(g, span, t, normalize(st.c1), rho0) * st.r;
 }
 
 VV SurfaceDiff<BSplineCurve>::position(const DiffContext& c, const BSplineCurve& g, const SurfacePoint& sp) {
@@ -206,7 +213,7 @@ DiffVertex SurfaceDiff<BSplineCurve>::attach(const DiffContext& c, const BSpline
   const SpanTape st = span_tape(c, g, sp.shape, span, t);
   const Var speed = length(st.c1);
   const VV T = st.c1 / speed;
-  const VV rho = radial_tape(T, g.radial(span, t, kTwoPi * sp.bary.y));
+  const VV rho = radial_tape(g, span, t, T, g.radial(span, t, kTwoPi * sp.bary.y));
   DiffVertex x;
   x.p = st.c + rho * st.r;
   // M_u x M_v = r (a rho - r' T), a = |C'| - r rho . T_v, T_v = C''_perp / |C'| (docs/curves.md).

@@ -31,12 +31,6 @@ CurveSample eval_points(const float* cps, uint32_t first, double t) {
   return s;
 }
 
-// The rotation about a x b taking unit a to unit b, applied to x (minimal rotation; a . b > -1).
-Vec3d rotate_min(const Vec3d& a, const Vec3d& b, const Vec3d& x) {
-  const Vec3d ab = a + b;
-  return x - (glm::dot(ab, x) / (1.0 + glm::dot(a, b))) * ab + 2.0 * glm::dot(a, x) * b;
-}
-
 // A unit vector perpendicular to unit n (Duff et al. 2017), only to start each curve's frame.
 Vec3d any_perpendicular(const Vec3d& n) {
   const double sign = std::copysign(1.0, n.z), a = -1.0 / (sign + n.z), b = n.x * n.y * a;
@@ -130,13 +124,19 @@ void TubeLocal::normal_derivatives(Vec3d& nu, Vec3d& nv) const {
 // ---- evaluation -----------------------------------------------------------------------------------
 CurveSample BSplineCurve::eval(size_t s, double t) const { return eval_points(control_points.data(), span_first[s], t); }
 
-Vec3d BSplineCurve::frame(size_t s, double t, const Vec3d& t_unit) const {
-  // Minimal rotation of the table's N1 at the sample below t to the tangent at t.
+void BSplineCurve::rest_frame(size_t s, double t, Vec3d& t_rest, Vec3d& n1_rest) const {
+  // The rest RMF between table samples: the sample below t turned minimally to the rest tangent at t.
   const int j = std::clamp(int(std::floor(std::clamp(t, 0.0, 1.0) * kFrameSamples)), 0, kFrameSamples - 1);
   const size_t k = s * (kFrameSamples + 1) + size_t(j);
-  const Vec3d t_j = glm::normalize(eval(s, double(j) / kFrameSamples).c1);
-  Vec3d n1 = rotate_min(t_j, t_unit, frame_n1[k]);
-  n1 -= glm::dot(n1, t_unit) * t_unit;
+  t_rest = glm::normalize(eval_points(rest_points.data(), span_first[s], t).c1);
+  n1_rest = rotate_min(frame_t[k], t_rest, frame_n1[k]);
+}
+
+Vec3d BSplineCurve::frame(size_t s, double t, const Vec3d& t_unit) const {
+  Vec3d t_rest, n1_rest;
+  rest_frame(s, t, t_rest, n1_rest);
+  Vec3d n1 = rotate_min(t_rest, t_unit, n1_rest);
+  n1 -= glm::dot(n1, t_unit) * t_unit;  // rounding only: the rotation keeps n1 perpendicular
   return glm::normalize(n1);
 }
 
@@ -351,19 +351,31 @@ void BSplineCurve::build_derived() {
   // Rotation-minimising frame along each curve: N1 carried from sample to sample by the minimal
   // rotation between consecutive unit tangents (the "rotation method"; O(h^2) from the exact RMF,
   // continuous across joints because a span's first entry is the previous span's last, rotated
-  // by the identity).
-  frame_n1.assign(S * (kFrameSamples + 1), Vec3d(0.0));
-  for (size_t k = 0; k < curve_count(); ++k) {
-    Vec3d t_prev(0.0), n1(0.0);
-    for (uint32_t s = first_span(k); s < first_span(k) + spans_of(k); ++s)
-      for (int j = 0; j <= kFrameSamples; ++j) {
-        const Vec3d tj = glm::normalize(eval(s, double(j) / kFrameSamples).c1);
-        if (s == first_span(k) && j == 0) n1 = any_perpendicular(tj);
-        else n1 = rotate_min(t_prev, tj, n1);
-        n1 = glm::normalize(n1 - glm::dot(n1, tj) * tj);
-        frame_n1[size_t(s) * (kFrameSamples + 1) + size_t(j)] = n1;
-        t_prev = tj;
-      }
+  // by the identity). Built on a rest copy of the points, refreshed only when needed (curve.h).
+  bool refresh = rest_points.size() != control_points.size() || frame_n1.size() != S * (kFrameSamples + 1);
+  for (size_t s = 0; s < S && !refresh; ++s)
+    for (int j = 0; j <= 4 * kFrameSamples && !refresh; ++j) {
+      const double t = double(j) / (4 * kFrameSamples);
+      const Vec3d a = glm::normalize(eval_points(rest_points.data(), span_first[s], t).c1), b = glm::normalize(eval(s, t).c1);
+      refresh = !(glm::dot(a, b) > 0.5);  // 60 degrees: far from the minimal rotation's singularity at 180
+    }
+  if (refresh) {
+    rest_points = control_points;
+    frame_n1.assign(S * (kFrameSamples + 1), Vec3d(0.0));
+    frame_t.assign(S * (kFrameSamples + 1), Vec3d(0.0));
+    for (size_t k = 0; k < curve_count(); ++k) {
+      Vec3d t_prev(0.0), n1(0.0);
+      for (uint32_t s = first_span(k); s < first_span(k) + spans_of(k); ++s)
+        for (int j = 0; j <= kFrameSamples; ++j) {
+          const Vec3d tj = glm::normalize(eval(s, double(j) / kFrameSamples).c1);
+          if (s == first_span(k) && j == 0) n1 = any_perpendicular(tj);
+          else n1 = rotate_min(t_prev, tj, n1);
+          n1 = glm::normalize(n1 - glm::dot(n1, tj) * tj);
+          frame_n1[size_t(s) * (kFrameSamples + 1) + size_t(j)] = n1;
+          frame_t[size_t(s) * (kFrameSamples + 1) + size_t(j)] = tj;
+          t_prev = tj;
+        }
+    }
   }
   // Areas per bin: 4-point Gauss-Legendre in t, 16 points around (periodic trapezoid, spectrally
   // accurate) of |M_u x M_v| = r sqrt((|C'| - r |T_v| cos u)^2 + r'^2).

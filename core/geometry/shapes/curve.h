@@ -6,7 +6,16 @@
 // C and r are one cubic uniform B-spline each (control points (x, y, z, r), Embree's basis); a
 // curve of n >= 4 control points has n - 3 spans, span s of a curve using points s .. s + 3. The
 // frame (N1, N2) rotates minimally along each curve (a discrete rotation-minimising frame), so it
-// is continuous across span joints and never refers to a fixed axis. The ends are open: no caps,
+// is continuous across span joints and never refers to a fixed axis.
+//
+// The frame is a function of the *local* tangent only, so that a point attached at (span, t, u)
+// depends on its span's four control points alone (its derivative is local and exact): the RMF is
+// built once on a rest copy of the centre line (rest_points), and at (s, t) the current frame is
+// the rest frame there turned by the minimal rotation from the rest tangent to the current one.
+// At rest it is the RMF; after edits it stays smooth and continuous (both factors are). The rest
+// copy is refreshed when the curve structure changes or a tangent has turned by more than 60
+// degrees from its rest direction (the minimal rotation degenerates at 180); that refresh is a
+// discrete relabelling of u between two update() calls, never inside one derivative. The ends are open: no caps,
 // the two rim circles are boundaries. The surface is one-sided: rays meet it from outside only
 // (Embree also reports hits from inside; the intersection filter drops them).
 //
@@ -31,6 +40,12 @@ struct CurveSample {
   Vec3d c, c1, c2, c3;     // C, C', C'', C'''
   double r, r1, r2;        // r, r', r''
 };
+
+// The rotation about a x b taking unit a to unit b, applied to x (minimal rotation; a . b > -1).
+inline Vec3d rotate_min(const Vec3d& a, const Vec3d& b, const Vec3d& x) {
+  const Vec3d ab = a + b;
+  return x - (glm::dot(ab, x) / (1.0 + glm::dot(a, b))) * ab + 2.0 * glm::dot(a, x) * b;
+}
 
 // The tube's local differential geometry at one point, in double (docs/curves.md). Built in a
 // frame that does not twist at this point (rho_v along T only), so F = 0 up to rounding; every
@@ -90,7 +105,9 @@ struct BSplineCurve {
   // Derived state (build_derived): spans, the frame table, areas and the sampling bins.
   std::vector<uint32_t> span_first;    // per span: its first control point (Embree's index buffer)
   std::vector<uint32_t> span_curve;    // per span: its curve
-  std::vector<Vec3d> frame_n1;         // per span kFrameSamples + 1 entries: N1 at t = j / kFrameSamples
+  std::vector<float> rest_points;      // the control points the frame table was built on
+  std::vector<Vec3d> frame_n1;         // per span kFrameSamples + 1 entries: rest N1 at t = j / kFrameSamples
+  std::vector<Vec3d> frame_t;          // the rest unit tangent there
   std::vector<Vec3> span_lo, span_hi;  // per span: bounding box of its tube
   std::vector<double> bin_area;        // per span kBins: the tube's area over that stretch of t
   Distribution1D bins;                 // over all spans' bins, by area / radius (about 2 pi x length)
@@ -108,6 +125,9 @@ struct BSplineCurve {
   CurveSample eval(size_t s, double t) const;
   // N1 of the frame at (s, t) for the unit tangent `t_unit` there (t clamped to [0, 1]).
   Vec3d frame(size_t s, double t, const Vec3d& t_unit) const;
+  // The rest centre line's unit tangent at (s, t) and its rest N1 (the frame before the final
+  // minimal rotation to the current tangent; constants for the derivative code).
+  void rest_frame(size_t s, double t, Vec3d& t_rest, Vec3d& n1_rest) const;
   // The radial direction rho for angle u at (s, t), and the local geometry there.
   Vec3d radial(size_t s, double t, double u) const;
   TubeLocal local(size_t s, double t, double u) const { return tube_local(eval(s, t), radial(s, t, u)); }
