@@ -390,7 +390,7 @@ void CameraSilhouettes<BSplineCurve>::append(const Scene&, const BSplineCurve& g
       for (int j = 0; j <= 8; ++j) {
         const double t = j / 8.0;
         double u;
-        glm::dvec2 cur;
+        glm::dvec2 cur(0.0);
         if (!silhouette_at(g, s, t, eye, false, side, 30, u)) {
           have_prev = false;
           continue;
@@ -417,7 +417,7 @@ void CameraSilhouettes<BSplineCurve>::append(const Scene&, const BSplineCurve& g
     glm::dvec2 prev(0.0);
     bool ok = true;
     for (int j = 0; j <= 32 && ok; ++j) {
-      glm::dvec2 cur;
+      glm::dvec2 cur(0.0);
       ok = view.film_of(v3d(g.local(span, t, kTwoPi * j / 32).p), cur);
       if (j > 0) len += glm::length(cur - prev);
       prev = cur;
@@ -466,20 +466,24 @@ bool curve_locate(const BSplineCurve& g, const Vec3& x, size_t& span_out, double
   for (size_t s = 0; s < g.span_count(); ++s) {
     const Vec3 pad = 1e-3f * (g.span_hi[s] - g.span_lo[s]);
     if (glm::any(glm::lessThan(x, g.span_lo[s] - pad)) || glm::any(glm::greaterThan(x, g.span_hi[s] + pad))) continue;
-    // Start at the nearest of 9 points of the centre line, then Newton on (x - C) . C' = 0.
+    // Start at the nearest of 17 points of the centre line, then Newton on h(t) = (x - C) . C' = 0
+    // (the foot of x on the centre line). The Hessian of |x - C|^2 / 2, |C'|^2 - (x - C) . C'', is
+    // positive near the foot when r is below the curvature radius (but small on the inside of a
+    // tight bend: 1 - r kappa); where it is not (below 1e-3 |C'|^2, far from the foot) the step
+    // falls back to Gauss-Newton (|C'|^2), which always descends.
     double t = 0.0, d_min = kInfinity;
-    for (int j = 0; j <= 8; ++j) {
-      const double d = glm::length(xd - g.eval(s, j / 8.0).c);
-      if (d < d_min) d_min = d, t = j / 8.0;
+    for (int j = 0; j <= 16; ++j) {
+      const double d = glm::length(xd - g.eval(s, j / 16.0).c);
+      if (d < d_min) d_min = d, t = j / 16.0;
     }
-    for (int it = 0; it < 20; ++it) {
+    for (int it = 0; it < 40; ++it) {
       const CurveSample cs = g.eval(s, t);
       const Vec3d D = xd - cs.c;
-      const double h = glm::dot(D, cs.c1), dh = -glm::dot(cs.c1, cs.c1) + glm::dot(D, cs.c2);
-      if (!(std::abs(dh) > 0.0)) break;
-      const double step = std::clamp(h / dh, -0.25, 0.25);
-      t = std::clamp(t - step, 0.0, 1.0);
-      if (std::abs(step) < 1e-14) break;
+      const double h = glm::dot(D, cs.c1), gn = glm::dot(cs.c1, cs.c1), hess = gn - glm::dot(D, cs.c2);
+      const double step = std::clamp(h / (hess > 1e-3 * gn ? hess : gn), -0.25, 0.25);
+      const double next = std::clamp(t + step, 0.0, 1.0);
+      if (std::abs(next - t) < 1e-15) break;
+      t = next;
     }
     const CurveSample cs = g.eval(s, t);
     const Vec3d D = xd - cs.c;

@@ -490,13 +490,15 @@ TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when ba
     const std::string quoted = "'" + name + "'";
     CHECK_THROWS_WITH_AS(set_values(*scene, name, base, bad, 1.0), doctest::Contains(quoted.c_str()), std::invalid_argument);
     CHECK(values_of(*scene, name) == base);  // rolled back
-    // A valid change (towards the probe's origin) reaches the acceleration structure.
+    // A valid change (towards the probe's origin) reaches the acceleration structure. Rigid moves
+    // go back along the probe ray, so the hit point moves with them to an earlier t whatever the
+    // shape's size (a thin curve would slip past the ray under a move across it).
     std::vector<double> grow(base.size(), 0.0);
-    const size_t stride = name.ends_with("control_points") ? 4 : 3;  // curves: (x, y, z, r) per point, moved towards the probe
-    for (size_t i = 0; i < base.size(); ++i) grow[i] = name.ends_with("translation") || name.ends_with("center") || stride == 4
-                                                        ? (i % stride == 1 ? -1.0 : 0.0)
-                                                    : name.ends_with("vertex_positions")                         ? double(base[i]) * 0.2
-                                                                                                                 : 0.2;
+    const bool rigid = name.ends_with("translation") || name.ends_with("center") || name.ends_with("control_points");
+    const size_t stride = name.ends_with("control_points") ? 4 : 3;  // curves: (x, y, z, r) per point, radius kept
+    for (size_t i = 0; i < base.size(); ++i) grow[i] = rigid ? (i % stride < 3 ? -double(probe.d[int(i % stride)]) : 0.0)
+                                                    : name.ends_with("vertex_positions") ? double(base[i]) * 0.2
+                                                                                         : 0.2;
     set_values(*scene, name, base, grow, 0.5);
     SurfaceInteraction after;
     REQUIRE(scene->intersect(probe, after));
