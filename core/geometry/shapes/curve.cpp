@@ -177,7 +177,9 @@ SilhouetteEquation BSplineCurve::silhouette_equation(size_t s, double t, const V
   q.D = sp * d2 - r * h * k2;
   q.E = sp * h - r * k2 * d2 - cs.r1 * dT;
   q.front = std::atan2(-d2, -d1);
-  q.linear = cs.r1 == 0.0;
+  // Constant radius: r' is then a rounding residue of the basis weights' sum (~1e-16 |C'|); the
+  // first factor is positive below the radius limit, so the roots are those of the second.
+  q.linear = std::abs(cs.r1) <= 1e-12 * sp;
   // Linear case: with r' = 0 the normal is rho and g / a = d1 cos u + d2 sin u + h.
   if (q.linear) q.A = q.B = 0.0, q.C = d1, q.D = d2, q.E = h;
   return q;
