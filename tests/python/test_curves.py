@@ -177,6 +177,33 @@ def test_curve_shadow_against_finite_differences(light, spp_boundary):
     assert np.abs(z_off).max() > 10, z_off
 
 
+# Two strands crossing like yarn: the upper one shadows the lower one and hides part of it.
+YARN = np.float32([[-1.0, 0.0, 0.0, 0.1], [-0.5, 0.05, 0.1, 0.12], [0.0, 0.0, 0.0, 0.12], [0.5, -0.05, 0.1, 0.12], [1.0, 0.0, 0.0, 0.1],
+                   [0.0, -1.0, 0.3, 0.1], [0.05, -0.5, 0.35, 0.12], [0.0, 0.0, 0.45, 0.12], [-0.05, 0.5, 0.35, 0.12], [0.0, 1.0, 0.3, 0.1]])
+
+
+@pytest.mark.parametrize("light,spp_boundary", [("point", 16), ("area", 512)], ids=["point light", "area light"])
+def test_yarn_shadowing_itself_against_finite_differences(light, spp_boundary):
+    """Two crossing strands of one curve shape: the upper strand moves, its shadow falls on the
+    lower strand and on the floor (the indirect term with a curve as the receiver)."""
+    scene_dict = shadow_scene(light, YARN)
+    scene_dict["fibre"]["curve_offsets"] = np.int32([0, 5])
+    scene_dict["sensor"] = camera((1.5, -3.0, 3.6), (0, 0, 0.9), fov=45, width=16, height=16, spp=64)  # the yarn and its shadow fill the view
+    scene = limn.load_dict(scene_dict)
+    name = "fibre.control_points"
+    t = np.zeros_like(YARN)
+    t[5:, 0], t[5:, 2] = 1.0, -0.3  # the upper strand only
+    scene.set_differentiable([name])
+    fd = fd_stack(scene, name, t, seeds=8)
+    on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=spp_boundary, seed=50 + k) for k in range(8)])
+    off = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=0, seed=50 + k) for k in range(8)])
+    z_on, z_off = block_z(on, fd), block_z(off, fd)
+    print(f"{light}: max |z| {np.abs(z_on).max():.2f} with the indirect term, {np.abs(z_off).max():.2f} without")
+    assert np.isfinite(on).all()
+    assert np.abs(z_on).max() < 5.0, z_on
+    assert np.abs(z_off).max() > 10, z_off
+
+
 # ---- stiff cases (design.md section 7) -------------------------------------------------------------
 
 STIFF = {
