@@ -509,3 +509,44 @@ TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when ba
     CHECK(back.t == doctest::Approx(before.t).epsilon(1e-5));
   }
 }
+
+// Curves only: the primary term's radiance probes pass 1e-3 pixels beside a silhouette, so rays
+// just inside an analytic silhouette must hit the tube (Embree plus the filter's Newton near
+// grazing) and rays just outside must not hit it there.
+TEST_CASE("curve: rays just inside an analytic silhouette hit the tube, rays just outside pass it") {
+  auto scene = CurveKind::scene();
+  const BSplineCurve& g = geometry_of<CurveKind>(*scene);
+  Pcg32 rng(17);
+  int inside = 0, inside_hit = 0, outside = 0, outside_clear = 0;
+  for (int i = 0; i < 400; ++i) {
+    const size_t s = size_t(rng.next_float() * float(g.span_count())) % g.span_count();
+    const double t = 0.05 + 0.9 * rng.next_float();
+    const Vec3d e = Vec3d(3.0 * rng.next_float() - 1.5, -4.0, 3.0 * rng.next_float() - 1.5);
+    double u;
+    const int side = rng.next_float() < 0.5f ? -1 : 1;
+    if (!BSplineCurve::silhouette_root(g.silhouette_equation(s, t, e, false), side, 50, u)) continue;
+    const TubeLocal L = g.local(s, t, u);
+    const Vec3d d0 = glm::normalize(L.p - e);
+    Vec3d off = L.n - glm::dot(L.n, d0) * d0;
+    off = glm::normalize(off);
+    for (double delta : {1e-3, 1e-4, 1e-5}) {
+      for (int sign : {-1, 1}) {
+        const Vec3d target = L.p + sign * delta * g.eval(s, t).r * off;
+        const Ray ray{Vec3(e), Vec3(glm::normalize(target - e)), 0.0f, kInfinity};
+        SurfaceInteraction si;
+        const bool hit = scene->intersect(ray, si);
+        const bool near = hit && glm::length(Vec3d(si.p) - L.p) < 0.2 * g.eval(s, t).r;
+        if (sign < 0) {
+          ++inside;
+          inside_hit += hit && double(si.t) <= glm::length(L.p - e) + 1e-3;  // this or a nearer surface
+        } else {
+          ++outside;
+          outside_clear += !near;
+        }
+      }
+    }
+  }
+  MESSAGE("inside hits " << inside_hit << " of " << inside << ", outside clear " << outside_clear << " of " << outside);
+  CHECK(inside_hit == inside);
+  CHECK(outside_clear == outside);
+}
