@@ -454,6 +454,12 @@ bool CameraSilhouettes<BSplineCurve>::point(const DiffContext& c, const BSplineC
   rim_of(g, curve.local - int(2 * S), span, t, end);
   const double u = kTwoPi * u01;
   const TubeLocal L = g.local(span, t, u);
+  // A rim point whose adjacent surface faces away from the eye is no visibility boundary: the
+  // one-sided tube is invisible from there on both sides of it (as finish_rim requires w . n > 0
+  // for the indirect term). Its probes would still catch any other edge passing within the probe
+  // offset and count it again (measured: the back half of a nearly edge-on rim doubled the end's
+  // derivative, tests/python/test_curves.py, the level view).
+  if (!(glm::dot(L.n, vec3d(eye) - L.p) > 0.0)) return false;
   P = curve_position(c, g, curve.shape, span, t, L.rho);
   dP = v3d(L.mu * kTwoPi);
   return true;
