@@ -11,7 +11,7 @@ namespace limn {
 struct Parameter {
   // Shape kinds' parameters, then the shape-independent ones. Geometric kinds move a surface and
   // can change visibility: they alone take part in the boundary terms.
-  enum class Kind { VertexPositions, VertexNormals, SphereCenter, SphereRadius, DiskRadius, Heights, SdfData, Translation, Reflectance, Alpha, EmitterValue };
+  enum class Kind { VertexPositions, VertexNormals, SphereCenter, SphereRadius, DiskRadius, Heights, SdfData, CurveControlPoints, Translation, Reflectance, Alpha, EmitterValue };
   std::string name;            // "<owner id>.<field>"
   Kind kind;
   int index;                   // shape, bsdf or emitter index

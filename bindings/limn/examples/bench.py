@@ -42,7 +42,7 @@ def method_options(method: str) -> dict:
 
 
 def default_tangent(value: np.ndarray, kind: str) -> np.ndarray:
-    if kind == "x" and value.ndim == 2 and value.shape[1] == 3:
+    if kind == "x" and value.ndim == 2 and value.shape[1] in (3, 4):  # vertices; curve points (x, y, z, r): radius kept
         t = np.zeros_like(value)
         t[:, 0] = 1.0
         return t

@@ -3,6 +3,7 @@
 // specialisation does not compile; a kind whose group is Unsupported is refused by name.
 #pragma once
 #include <stdexcept>
+#include "core/diff/shapes/curve.h"
 #include "core/diff/shapes/disk.h"
 #include "core/diff/shapes/heightfield.h"
 #include "core/diff/shapes/mesh.h"

@@ -11,6 +11,7 @@
 #include <string>
 #include <variant>
 #include "core/geometry/parameter.h"
+#include "core/geometry/shapes/curve.h"
 #include "core/geometry/shapes/disk.h"
 #include "core/geometry/shapes/heightfield/heightfield.h"
 #include "core/geometry/shapes/mesh.h"
@@ -19,7 +20,7 @@
 
 namespace limn {
 
-using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield, Disk, SdfGrid>;
+using ShapeGeometry = std::variant<Mesh, Sphere, Heightfield, Disk, SdfGrid, BSplineCurve>;
 
 // What a shape kind G implements (see Mesh for the documentation of each operation).
 template <typename G>
@@ -53,7 +54,7 @@ static_assert(all_shape_kinds(static_cast<const ShapeGeometry*>(nullptr)), "ever
 
 struct Shape {
   std::string id;          // unique name in the scene (the dictionary key in the scene description)
-  std::string type;        // scene-format type it was created from: obj, ply, mesh, rectangle, cube, sphere, heightfield, disk
+  std::string type;        // scene-format type it was created from: obj, ply, mesh, rectangle, cube, sphere, heightfield, disk, sdfgrid, bsplinecurve
   ShapeGeometry geometry;
   int bsdf = -1;           // index into Scene::bsdfs
   int emitter = -1;        // index into Scene::emitters (an area emitter), or -1

@@ -14,6 +14,7 @@ const std::map<std::string, ShapeLoader>& shape_kinds() {
       {"rectangle", load_mesh_shape}, {"cube", load_mesh_shape}, {"sphere", load_sphere},
       {"heightfield", load_heightfield}, {"disk", load_disk},
       {"sdfgrid", load_sdfgrid},
+      {"bsplinecurve", load_bsplinecurve},
   };
   return table;
 }

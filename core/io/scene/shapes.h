@@ -34,6 +34,8 @@ ShapeGeometry load_sphere(const Props& p, const std::string& type, const Transfo
 ShapeGeometry load_disk(const Props& p, const std::string& type, const Transform& to_world);
 // heightfield (heightfield.cpp).
 ShapeGeometry load_heightfield(const Props& p, const std::string& type, const Transform& to_world);
+// bsplinecurve (curve.cpp).
+ShapeGeometry load_bsplinecurve(const Props& p, const std::string& type, const Transform& to_world);
 
 // sdfgrid (sdfgrid.cpp).
 ShapeGeometry load_sdfgrid(const Props& p, const std::string& type, const Transform& to_world);

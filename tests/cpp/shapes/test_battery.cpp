@@ -328,6 +328,61 @@ struct SdfKind {
       ta = tb, fa = fb;
     }
     return std::nullopt;
+
+struct CurveKind {
+  using G = BSplineCurve;
+  // Three curves: a bent one with strongly varying radius, a constant-radius one (the closed-form
+  // silhouette) and a short one of a single span (both rims on one span).
+  static std::unique_ptr<Scene> scene() {
+    return scene_with_shape(R"({"type": "bsplinecurve", "curve_offsets": [0, 7, 12], "control_points": [
+        [-0.8, 0.0, -0.2, 0.10], [-0.5, 0.2, 0.05, 0.13], [-0.2, -0.1, 0.25, 0.15], [0.1, 0.15, 0.15, 0.14],
+        [0.35, -0.05, -0.05, 0.1], [0.6, 0.2, 0.05, 0.18], [0.8, 0.0, 0.3, 0.12],
+        [-0.6, -0.3, -0.55, 0.12], [-0.25, -0.45, -0.45, 0.12], [0.05, -0.3, -0.6, 0.12], [0.4, -0.45, -0.4, 0.12], [0.7, -0.3, -0.55, 0.12],
+        [-0.3, 0.5, 0.5, 0.09], [-0.1, 0.45, 0.65, 0.15], [0.15, 0.5, 0.55, 0.11], [0.35, 0.4, 0.7, 0.08]]})");
+  }
+  static inline const std::vector<std::string> params = {"shape.control_points", "shape.to_world.translation"};
+  static std::array<SurfacePoint, 2> neighbours(SurfacePoint sp, float h) {
+    SurfacePoint a = sp, b = sp;
+    a.bary.x += sp.bary.x > 0.5f ? -h : h;
+    b.bary.y += h;
+    return {a, b};
+  }
+  static float clearance(const Scene&, const BoundarySegment&, const BoundaryPoint&) { return kInfinity; }
+  // Independent of Embree and of the filter's Newton on (v, t): Newton on o + t d = M(u, v) over
+  // (u, v, t) from a grid of starts on every span the ray's box test passes, the nearest hit seen
+  // from outside.
+  static std::optional<double> reference_hit(const BSplineCurve& g, const Ray& r) {
+    std::optional<double> best;
+    const Vec3d o(r.o), d(r.d);
+    for (size_t s = 0; s < g.span_count(); ++s) {
+      double t0 = 0.0, t1 = 1e30;
+      for (int a = 0; a < 3; ++a) {
+        const double inv = 1.0 / d[a], lo = (g.span_lo[s][a] - 1e-3 - o[a]) * inv, hi = (g.span_hi[s][a] + 1e-3 - o[a]) * inv;
+        t0 = std::max(t0, std::min(lo, hi));
+        t1 = std::min(t1, std::max(lo, hi));
+      }
+      if (t0 > t1) continue;
+      for (int iv = 0; iv < 4; ++iv)
+        for (int iu = 0; iu < 8; ++iu) {
+          double v = (iv + 0.5) / 4, u = 2 * M_PI * iu / 8;
+          double t = glm::dot(g.local(s, v, u).p - o, d);
+          bool converged = false;
+          for (int it = 0; it < 30 && !converged; ++it) {
+            const TubeLocal L = g.local(s, v, u);
+            const Vec3d F = L.p - o - t * d;
+            const glm::dmat3 J(L.mu, L.mv, -d);
+            if (std::abs(glm::determinant(J)) < 1e-14) break;
+            const Vec3d step = glm::inverse(J) * F;
+            u -= step.x, v -= std::clamp(step.y, -0.3, 0.3), t -= step.z;
+            if (v < -0.5 || v > 1.5) break;
+            converged = glm::length(step) < 1e-12;
+          }
+          if (!converged || v < 0.0 || v > 1.0 || !(t > r.tmin && t < r.tmax)) continue;
+          if (glm::dot(g.local(s, v, u).n, d) >= 0.0) continue;  // from inside: one-sided
+          if (!best || t < *best) best = t;
+        }
+    }
+    return best;
   }
 };
 
@@ -375,9 +430,11 @@ std::vector<Var> scalars(const DiffVertex& x, bool full) {
   return s;
 }
 
-// Whether the line through `p` along w meets the shape within `radius` of `near`.
+// Whether the line through `p` along w meets the shape within `radius` of `near`, traced along -w
+// as the boundary term's light travels (from the observer past x_b): one-sided surfaces (curves)
+// block only rays that meet them from outside; for two-sided kinds the direction does not matter.
 bool line_meets_shape_near(const Scene& scene, const Vec3& p, const Vec3& w, const Vec3& near, float radius) {
-  Ray r{p - 2.0f * radius * w, w, 0.0f, 4.0f * radius};
+  Ray r{p + 2.0f * radius * w, -w, 0.0f, 4.0f * radius};
   for (int k = 0; k < 8; ++k) {
     SurfaceInteraction si;
     if (!scene.intersect(r, si)) return false;
@@ -390,7 +447,7 @@ bool line_meets_shape_near(const Scene& scene, const Vec3& p, const Vec3& w, con
 }  // namespace
 
 TEST_CASE_TEMPLATE("shape battery: intersection agrees with an independent answer, and rays leaving a hit do not re-hit it", K,
-                   MeshKind, SphereKind, HeightfieldKind, DiskKind, SdfKind) {
+                   MeshKind, SphereKind, HeightfieldKind, DiskKind, SdfKind, CurveKind) {
   auto scene = K::scene();
   const auto& g = geometry_of<K>(*scene);
   Pcg32 rng(7);
@@ -429,7 +486,7 @@ TEST_CASE_TEMPLATE("shape battery: intersection agrees with an independent answe
 }
 
 TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree with finite differences", K, MeshKind, SphereKind,
-                   HeightfieldKind, DiskKind, SdfKind) {
+                   HeightfieldKind, DiskKind, SdfKind, CurveKind) {
   auto scene = K::scene();
   for (const std::string& name : K::params) {
     CAPTURE(name);
@@ -509,7 +566,7 @@ TEST_CASE_TEMPLATE("shape battery: attached points, vertices and ray hits agree 
 }
 
 TEST_CASE_TEMPLATE("shape battery: boundary samples invert exactly and E[1/pdf] is the segments' measure", K, MeshKind, SphereKind,
-                   HeightfieldKind, DiskKind, SdfKind) {
+                   HeightfieldKind, DiskKind, SdfKind, CurveKind) {
   auto scene = K::scene();
   const DiffParams params(*scene, {K::params.front()});
   if constexpr (is_unsupported<BoundarySegments<typename K::G>>) {
@@ -549,7 +606,7 @@ TEST_CASE_TEMPLATE("shape battery: boundary samples invert exactly and E[1/pdf] 
   }
 }
 
-TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, MeshKind, SphereKind, HeightfieldKind, DiskKind, SdfKind) {
+TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, MeshKind, SphereKind, HeightfieldKind, DiskKind, SdfKind, CurveKind) {
   auto scene = K::scene();
   const DiffParams params(*scene, {K::params.front()});
   if constexpr (is_unsupported<BoundarySegments<typename K::G>>) {
@@ -601,7 +658,7 @@ TEST_CASE_TEMPLATE("shape battery: projections land on true silhouettes", K, Mes
 }
 
 TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when bad, and reach the acceleration structure", K, MeshKind,
-                   SphereKind, HeightfieldKind, DiskKind, SdfKind) {
+                   SphereKind, HeightfieldKind, DiskKind, SdfKind, CurveKind) {
   auto scene = K::scene();
   // From above and in front (a heightfield is open below), at the shape's middle.
   const Ray probe{Vec3(0.05f, -2.2f, 1.6f), glm::normalize(Vec3(0.0f, 0.0f, 0.15f) - Vec3(0.05f, -2.2f, 1.6f)), 0.0f, kInfinity};
@@ -627,12 +684,16 @@ TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when ba
         continue;
       }
     }
-    // A valid change (towards the probe's origin) reaches the acceleration structure.
+    // A valid change (towards the probe's origin) reaches the acceleration structure. Rigid moves
+    // go back along the probe ray, so the hit point moves with them to an earlier t whatever the
+    // shape's size (a thin curve would slip past the ray under a move across it).
     std::vector<double> grow(base.size(), 0.0);
-    for (size_t i = 0; i < base.size(); ++i) grow[i] = name.ends_with("translation") || name.ends_with("center") ? (i % 3 == 1 ? -1.0 : 0.0)
-                                                    : name.ends_with("vertex_positions")                         ? double(base[i]) * 0.2
-                                                    : name.ends_with(".data")                                    ? -0.2  // f < 0 inside
-                                                                                                                 : 0.2;
+    const bool rigid = name.ends_with("translation") || name.ends_with("center") || name.ends_with("control_points");
+    const size_t stride = name.ends_with("control_points") ? 4 : 3;  // curves: (x, y, z, r) per point, radius kept
+    for (size_t i = 0; i < base.size(); ++i) grow[i] = rigid ? (i % stride < 3 ? -double(probe.d[int(i % stride)]) : 0.0)
+                                                    : name.ends_with("vertex_positions") ? double(base[i]) * 0.2
+                                                    : name.ends_with(".data")            ? -0.2  // f < 0 inside
+                                                                                         : 0.2;
     set_values(*scene, name, base, grow, 0.5);
     SurfaceInteraction after;
     REQUIRE(scene->intersect(probe, after));
@@ -642,4 +703,45 @@ TEST_CASE_TEMPLATE("shape battery: parameters are validated, rolled back when ba
     REQUIRE(scene->intersect(probe, back));
     CHECK(back.t == doctest::Approx(before.t).epsilon(1e-5));
   }
+}
+
+// Curves only: the primary term's radiance probes pass 1e-3 pixels beside a silhouette, so rays
+// just inside an analytic silhouette must hit the tube (Embree plus the filter's Newton near
+// grazing) and rays just outside must not hit it there.
+TEST_CASE("curve: rays just inside an analytic silhouette hit the tube, rays just outside pass it") {
+  auto scene = CurveKind::scene();
+  const BSplineCurve& g = geometry_of<CurveKind>(*scene);
+  Pcg32 rng(17);
+  int inside = 0, inside_hit = 0, outside = 0, outside_clear = 0;
+  for (int i = 0; i < 400; ++i) {
+    const size_t s = size_t(rng.next_float() * float(g.span_count())) % g.span_count();
+    const double t = 0.05 + 0.9 * rng.next_float();
+    const Vec3d e = Vec3d(3.0 * rng.next_float() - 1.5, -4.0, 3.0 * rng.next_float() - 1.5);
+    double u;
+    const int side = rng.next_float() < 0.5f ? -1 : 1;
+    if (!BSplineCurve::silhouette_root(g.silhouette_equation(s, t, e, false), side, 50, u)) continue;
+    const TubeLocal L = g.local(s, t, u);
+    const Vec3d d0 = glm::normalize(L.p - e);
+    Vec3d off = L.n - glm::dot(L.n, d0) * d0;
+    off = glm::normalize(off);
+    for (double delta : {1e-3, 1e-4, 1e-5}) {
+      for (int sign : {-1, 1}) {
+        const Vec3d target = L.p + sign * delta * g.eval(s, t).r * off;
+        const Ray ray{Vec3(e), Vec3(glm::normalize(target - e)), 0.0f, kInfinity};
+        SurfaceInteraction si;
+        const bool hit = scene->intersect(ray, si);
+        const bool near = hit && glm::length(Vec3d(si.p) - L.p) < 0.2 * g.eval(s, t).r;
+        if (sign < 0) {
+          ++inside;
+          inside_hit += hit && double(si.t) <= glm::length(L.p - e) + 1e-3;  // this or a nearer surface
+        } else {
+          ++outside;
+          outside_clear += !near;
+        }
+      }
+    }
+  }
+  MESSAGE("inside hits " << inside_hit << " of " << inside << ", outside clear " << outside_clear << " of " << outside);
+  CHECK(inside_hit == inside);
+  CHECK(outside_clear == outside);
 }
