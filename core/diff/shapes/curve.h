@@ -57,6 +57,10 @@ struct CameraSilhouettes<BSplineCurve> {
                      uint64_t& skipped);
   static bool point(const DiffContext& c, const BSplineCurve& g, const SilhouetteCurve& curve, float u, const ad::V3<double>& eye,
                     ad::V3<ad::Var>& P, ad::V3<double>& dP, double& pdf_param);
+  // None: a smooth tube's outline and its rims are shaded by probe rays.
+  static void sides(const Scene&, const BSplineCurve&, const SilhouetteCurve&, const Vec3&, const ad::V3<double>&, CurveSides& out) {
+    out.count = 0;
+  }
 };
 
 // Locates the surface point nearest to x on the tube (for exact inverses): span, t and u; false

@@ -82,8 +82,7 @@ ShapeGeometry load_bsplinecurve(const Props& p, const std::string&, const Transf
   offsets.push_back(uint32_t(c.control_points.size() / 4));
   c.curve_offsets = offsets;
   if (p.has("to_world")) {
-    float scale;
-    check_similarity(p, to_world, scale);
+    const float scale = float(check_similarity(p, to_world));
     for (size_t i = 0; i < c.point_count(); ++i) {
       const Vec3 q = to_world.point(c.point(i));
       c.control_points[4 * i] = q.x, c.control_points[4 * i + 1] = q.y, c.control_points[4 * i + 2] = q.z;

@@ -328,6 +328,8 @@ struct SdfKind {
       ta = tb, fa = fb;
     }
     return std::nullopt;
+  }
+};
 
 struct CurveKind {
   using G = BSplineCurve;
@@ -341,11 +343,11 @@ struct CurveKind {
         [-0.3, 0.5, 0.5, 0.09], [-0.1, 0.45, 0.65, 0.15], [0.15, 0.5, 0.55, 0.11], [0.35, 0.4, 0.7, 0.08]]})");
   }
   static inline const std::vector<std::string> params = {"shape.control_points", "shape.to_world.translation"};
-  static std::array<SurfacePoint, 2> neighbours(SurfacePoint sp, float h) {
+  static std::array<SurfacePoint, 3> neighbours(const Scene&, SurfacePoint sp, float h) {
     SurfacePoint a = sp, b = sp;
     a.bary.x += sp.bary.x > 0.5f ? -h : h;
     b.bary.y += h;
-    return {a, b};
+    return {sp, a, b};
   }
   static float clearance(const Scene&, const BoundarySegment&, const BoundaryPoint&) { return kInfinity; }
   // Independent of Embree and of the filter's Newton on (v, t): Newton on o + t d = M(u, v) over
