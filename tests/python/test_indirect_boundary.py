@@ -349,7 +349,7 @@ DOCUMENTED_DEFAULTS = {
     "direction_resolution": 256, "direction_octaves": 2, "guide_refresh": 8, "guide_refresh_threshold": 0.02,
     "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
     "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True, "theta_subrange": 0.0,
-    "shading_horizon": True, "max_depth": None,
+    "shading_horizon": True, "max_depth": None, "boundary_parts": "both",
 }
 
 
