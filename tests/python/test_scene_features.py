@@ -494,7 +494,7 @@ def test_disk_backward_matches_forward():
 
 def test_disk_errors():
     base = {"type": "scene", "sensor": camera((0, -3, 0), (0, 0, 0), width=8, height=8, spp=4)}
-    with pytest.raises(ValueError, match="to_world must be a rotation, uniform scale and translation"):
+    with pytest.raises(ValueError, match="'to_world' must be a rotation, uniform scale and translation"):
         limn.load_dict({**base, "d": {"type": "disk", "to_world": {"scale": [1, 2, 1]}}})
     scene = limn.load_dict({**base, "d": {"type": "disk"}})
     scene.params["d.radius"][...] = -1.0
