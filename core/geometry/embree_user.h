@@ -1,4 +1,4 @@
-// Embree 3 user geometry for shapes with their own exact intersectors (spheres, heightfields): one
+// Embree 3 user geometry for shapes with their own exact intersectors (spheres, disks, heightfields): one
 // primitive per shape, intersected by G::intersect(ray, t) in the callbacks; the surface record is
 // rebuilt afterwards by G::fill_hit. Callbacks never throw (they run inside Embree's C frames).
 #pragma once
@@ -21,6 +21,20 @@ inline Ray ray_from_n(RTCRayN* ray, unsigned N, unsigned i) {
   return r;
 }
 
+// Records a hit at t for ray i of the packet; the surface is rebuilt later by G::fill_hit, so
+// the normal and uv written here are placeholders.
+inline void record_hit(const RTCIntersectFunctionNArguments* args, RTCRayN* ray, RTCHitN* hit, unsigned i, float t) {
+  RTCRayN_tfar(ray, args->N, i) = t;
+  RTCHitN_Ng_x(hit, args->N, i) = 0.0f;
+  RTCHitN_Ng_y(hit, args->N, i) = 0.0f;
+  RTCHitN_Ng_z(hit, args->N, i) = 1.0f;
+  RTCHitN_u(hit, args->N, i) = 0.0f;
+  RTCHitN_v(hit, args->N, i) = 0.0f;
+  RTCHitN_primID(hit, args->N, i) = args->primID;
+  RTCHitN_geomID(hit, args->N, i) = args->geomID;
+  RTCHitN_instID(hit, args->N, i, 0) = args->context->instID[0];
+}
+
 template <typename G>
 void intersect(const RTCIntersectFunctionNArguments* args) {
   const G& g = *static_cast<const G*>(args->geometryUserPtr);
@@ -31,15 +45,7 @@ void intersect(const RTCIntersectFunctionNArguments* args) {
     const Ray r = ray_from_n(ray, args->N, i);
     float t;
     if (!g.intersect(r, t)) continue;
-    RTCRayN_tfar(ray, args->N, i) = t;
-    RTCHitN_Ng_x(hit, args->N, i) = 0.0f;
-    RTCHitN_Ng_y(hit, args->N, i) = 0.0f;
-    RTCHitN_Ng_z(hit, args->N, i) = 1.0f;
-    RTCHitN_u(hit, args->N, i) = 0.0f;
-    RTCHitN_v(hit, args->N, i) = 0.0f;
-    RTCHitN_primID(hit, args->N, i) = args->primID;
-    RTCHitN_geomID(hit, args->N, i) = args->geomID;
-    RTCHitN_instID(hit, args->N, i, 0) = args->context->instID[0];
+    record_hit(args, ray, hit, i, t);
   }
 }
 

@@ -353,15 +353,7 @@ void sdf_intersect(const RTCIntersectFunctionNArguments* args) {
     if (!s.intersect_voxel(v, s.grid_from_world(Vec3d(r.o)), s.A_inv * Vec3d(r.d), r.tmin, r.tmax, t)) continue;
     const float tf = float(t);
     if (!(tf > r.tmin && tf < r.tmax)) continue;  // rounding to float left the interval
-    RTCRayN_tfar(ray, args->N, i) = tf;
-    RTCHitN_Ng_x(hit, args->N, i) = 0.0f;
-    RTCHitN_Ng_y(hit, args->N, i) = 0.0f;
-    RTCHitN_Ng_z(hit, args->N, i) = 1.0f;
-    RTCHitN_u(hit, args->N, i) = 0.0f;
-    RTCHitN_v(hit, args->N, i) = 0.0f;
-    RTCHitN_primID(hit, args->N, i) = args->primID;
-    RTCHitN_geomID(hit, args->N, i) = args->geomID;
-    RTCHitN_instID(hit, args->N, i, 0) = args->context->instID[0];
+    embree_user::record_hit(args, ray, hit, i, tf);
   }
 }
 
