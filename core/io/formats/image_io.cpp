@@ -5,6 +5,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <stdexcept>
 #include "core/io/formats/files.h"
@@ -108,6 +109,17 @@ std::string check_exr_header(const std::string& path, uint64_t file_size) {
     if (size > h.size() - value) return "truncated OpenEXR header (attribute '" + printable(name, 40) + "')";
     // Values that OpenEXR sizes by counts inside them, not by the attribute's size.
     const std::string type = h.substr(name_end + 1, type_end - name_end - 1);
+    // Fixed-size types: OpenEXR reads their value by its type, whatever size the file states, so a
+    // wrong size shifts every attribute after it (a shifted size field then sized an allocation of
+    // 1.4 GB; found by fuzz_heightfield).
+    static const std::map<std::string, uint32_t> kFixedSize = {
+        {"box2i", 16}, {"box2f", 16}, {"v2i", 8}, {"v2f", 8}, {"v2d", 16}, {"v3i", 12}, {"v3f", 12}, {"v3d", 24},
+        {"float", 4}, {"double", 8}, {"int", 4}, {"compression", 1}, {"lineOrder", 1}, {"envmap", 1}, {"deepImageState", 1},
+        {"m33f", 36}, {"m33d", 72}, {"m44f", 64}, {"m44d", 128}, {"chromaticities", 32}, {"rational", 8}, {"tiledesc", 9},
+        {"keycode", 28}, {"timecode", 8}};
+    if (const auto fixed = kFixedSize.find(type); fixed != kFixedSize.end() && size != fixed->second)
+      return "the OpenEXR attribute '" + printable(name, 40) + "' of type " + type + " has size " + std::to_string(size) + " (it must be " +
+             std::to_string(fixed->second) + ")";
     if (type == "preview" && (size < 8 || uint64_t(u32(value)) * u32(value + 4) * 4 != size - 8))
       return "the OpenEXR preview image '" + printable(name, 40) + "' does not match its size";
     if (type == "stringvector")
