@@ -177,21 +177,27 @@ YARN = np.float32([[-1.0, 0.0, 0.0, 0.1], [-0.5, 0.05, 0.1, 0.12], [0.0, 0.0, 0.
                    [0.0, -1.0, 0.3, 0.1], [0.05, -0.5, 0.35, 0.12], [0.0, 0.0, 0.45, 0.12], [-0.05, 0.5, 0.35, 0.12], [0.0, 1.0, 0.3, 0.1]])
 
 
+def yarn_with_fd(light):
+    """The yarn under `light`, framed so that it and its shadow fill the view; the upper strand's
+    tangent and 8 seeds of finite differences."""
+    scene_dict = shadow_scene(light, YARN)
+    scene_dict["fibre"]["curve_offsets"] = np.int32([0, 5])
+    scene_dict["sensor"] = camera((1.5, -3.0, 3.6), (0, 0, 0.9), fov=45, width=16, height=16, spp=64)
+    scene = limn.load_dict(scene_dict)
+    name = "fibre.control_points"
+    t = np.zeros_like(YARN)
+    t[5:, 0], t[5:, 2] = 1.0, -0.3  # the upper strand only
+    scene.set_differentiable([name])
+    return scene, name, t, fd_stack(scene, name, t, seeds=8)
+
+
 @pytest.mark.parametrize("light,spp_boundary", [("point", 16), ("area", 512)], ids=["point light", "area light"])
 def test_yarn_shadowing_itself_against_finite_differences(light, spp_boundary):
     """Two crossing strands of one curve shape: the upper strand moves, its shadow falls on the
     lower strand and on the floor (the indirect term with a curve as the receiver). Uniform
     boundary samples: the guided estimators are precise enough to show a bias here that uniform
     sampling's noise hides (test_yarn_with_guides_is_still_biased below)."""
-    scene_dict = shadow_scene(light, YARN)
-    scene_dict["fibre"]["curve_offsets"] = np.int32([0, 5])
-    scene_dict["sensor"] = camera((1.5, -3.0, 3.6), (0, 0, 0.9), fov=45, width=16, height=16, spp=64)  # the yarn and its shadow fill the view
-    scene = limn.load_dict(scene_dict)
-    name = "fibre.control_points"
-    t = np.zeros_like(YARN)
-    t[5:, 0], t[5:, 2] = 1.0, -0.3  # the upper strand only
-    scene.set_differentiable([name])
-    fd = fd_stack(scene, name, t, seeds=8)
+    scene, name, t, fd = yarn_with_fd(light)
     on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=spp_boundary, guiding="none", seed=50 + k) for k in range(8)])
     off = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=0, seed=50 + k) for k in range(8)])
     z_on, z_off = block_z(on, fd), block_z(off, fd)
@@ -228,14 +234,6 @@ def test_stiff_curves_give_finite_images_and_derivatives(case):
 @pytest.mark.xfail(strict=True, reason="open: the yarn's self-shadow under an area light is biased (docs/reports/curves/README.md, "
                                        "the yarn pixel); guided samples (grid |z| 15, octree 13) resolve it, uniform ones (|z| 2.3) do not")
 def test_yarn_with_guides_is_still_biased():
-    scene_dict = shadow_scene("area", YARN)
-    scene_dict["fibre"]["curve_offsets"] = np.int32([0, 5])
-    scene_dict["sensor"] = camera((1.5, -3.0, 3.6), (0, 0, 0.9), fov=45, width=16, height=16, spp=64)
-    scene = limn.load_dict(scene_dict)
-    name = "fibre.control_points"
-    t = np.zeros_like(YARN)
-    t[5:, 0], t[5:, 2] = 1.0, -0.3
-    scene.set_differentiable([name])
-    fd = fd_stack(scene, name, t, seeds=8)
+    scene, name, t, fd = yarn_with_fd("area")
     on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=512, guiding="grid", seed=50 + k) for k in range(8)])
     assert np.abs(block_z(on, fd)).max() < 5.0
