@@ -107,7 +107,6 @@ std::string check_exr_header(const std::string& path, uint64_t file_size) {
     const uint32_t size = u32(type_end + 1);
     const size_t value = type_end + 5;
     if (size > h.size() - value) return "truncated OpenEXR header (attribute '" + printable(name, 40) + "')";
-    // Values that OpenEXR sizes by counts inside them, not by the attribute's size.
     const std::string type = h.substr(name_end + 1, type_end - name_end - 1);
     // Fixed-size types: OpenEXR reads their value by its type, whatever size the file states, so a
     // wrong size shifts every attribute after it (a shifted size field then sized an allocation of
@@ -120,6 +119,7 @@ std::string check_exr_header(const std::string& path, uint64_t file_size) {
     if (const auto fixed = kFixedSize.find(type); fixed != kFixedSize.end() && size != fixed->second)
       return "the OpenEXR attribute '" + printable(name, 40) + "' of type " + type + " has size " + std::to_string(size) + " (it must be " +
              std::to_string(fixed->second) + ")";
+    // Values that OpenEXR sizes by counts inside them, not by the attribute's size.
     if (type == "preview" && (size < 8 || uint64_t(u32(value)) * u32(value + 4) * 4 != size - 8))
       return "the OpenEXR preview image '" + printable(name, 40) + "' does not match its size";
     if (type == "stringvector")
@@ -127,20 +127,31 @@ std::string check_exr_header(const std::string& path, uint64_t file_size) {
         if (size - k < 4 || u32(value + k) > size - k - 4) return "the OpenEXR string list '" + printable(name, 40) + "' overruns its size";
         k += 4 + u32(value + k);
       }
+    // OpenEXR allocates an ID manifest's data as its size less the uncompressed-size field (4 bytes
+    // in OpenEXR 3.1, 8 in later versions): a smaller size would wrap around.
+    if (type == "idmanifest" && size < 8) return "the OpenEXR ID manifest '" + printable(name, 40) + "' is shorter than 8 bytes";
+    if (type == "chlist") {
+      // OpenEXR reads any channel list up to its empty name, whatever size the file states, and a
+      // channel name up to 255 characters: either mismatch would shift the attributes after it.
+      uint64_t list_bytes = 0;
+      size_t k = value;
+      while (k < value + size && h[k] != '\0') {  // name, type, pLinear, reserved, xSampling, ySampling
+        const size_t end = h.find('\0', k);
+        if (end == std::string::npos || end + 17 > value + size) return "truncated OpenEXR channel list '" + printable(name, 40) + "'";
+        if (end - k > 255) return "an OpenEXR channel name longer than 255 characters in '" + printable(name, 40) + "'";
+        list_bytes += u32(end + 1) == 1 ? 2 : 4;  // half, else uint or float
+        k = end + 17;
+      }
+      if (k + 1 != value + size) return "the OpenEXR channel list '" + printable(name, 40) + "' does not end where its size says";
+      if (name == "channels") pixel_bytes = list_bytes;
+    }
     if (name == "dataWindow" && size == 16) {
       const auto i32 = [&](size_t k) { return int64_t(int32_t(u32(value + 4 * k))); };
       w = i32(2) - i32(0) + 1;
       hgt = i32(3) - i32(1) + 1;
       have_window = true;
-    } else if (name == "channels" && type == "chlist") {
-      for (size_t k = value; k < value + size && h[k] != '\0';) {  // name, type, pLinear, reserved, xSampling, ySampling
-        const size_t end = h.find('\0', k);
-        if (end == std::string::npos || end + 17 > value + size) return "truncated OpenEXR channel list";
-        const uint32_t kind = u32(end + 1);
-        pixel_bytes += kind == 1 ? 2 : 4;
-        k = end + 17;
-      }
-    } else if (name == "compression" && size == 1) {
+    }
+    if (name == "compression" && size == 1) {
       compression = uint8_t(h[value]);
     } else if (name == "tiles" && size == 9) {
       tile_x = u32(value);
