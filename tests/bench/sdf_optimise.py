@@ -232,7 +232,7 @@ def targets(bunny, size: int, views: int, spp: int = 256):
 
 def optimise(n: int = 32, size: int = 64, views: int = 4, iterations: int = 150, lr: float = 2e-3, k: int = 10,
              spp: int = 8, radius: float = 0.3, bunny=None, verbose: bool = True, chamfer_every: int = 10,
-             seed: int = 0) -> dict:
+             seed: int = 0, guiding: str = "none") -> dict:
     """Optimise an n^3 sphere grid against the bunny's renders; redistance every k iterations (0: never).
     Returns the history (iteration, seconds, loss, Chamfer) and the scenes and grid at the end."""
     bunny = read_bunny() if bunny is None else bunny
@@ -257,7 +257,7 @@ def optimise(n: int = 32, size: int = 64, views: int = 4, iterations: int = 150,
             value, adjoint = optim.l2(img, target)
             loss += value / len(scenes)
             if it < iterations:
-                grad += s.render_backward(adjoint / len(scenes), spp=spp, seed=seed + 104729 * it + v)[name]
+                grad += s.render_backward(adjoint / len(scenes), spp=spp, seed=seed + 104729 * it + v, guiding=guiding)[name]
         timer += time.perf_counter() - start
         record = {"iteration": it, "seconds": timer, "loss": loss, "chamfer": None}
         if it % chamfer_every == 0 or it == iterations:
