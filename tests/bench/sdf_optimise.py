@@ -203,6 +203,20 @@ def chamfer_error(data: np.ndarray, truth_points: np.ndarray, n: int = 3000, see
     return chamfer(to_world(pts), truth_points)
 
 
+def smooth_gradient(grad: np.ndarray, lambda_: float) -> np.ndarray:
+    """(I + lambda L)^-1 grad on the grid, L the 7-point Laplacian in voxel units: the Sobolev
+    preconditioner of Large Steps (Nicolet et al. 2021, Eq. 7) on grid values instead of vertices,
+    solved exactly by FFT. Periodic wrap-around at the grid's faces: the gradient is zero there
+    (the surface stays inside the cube), so the wrap only couples zeros. lambda 0: unchanged."""
+    if lambda_ <= 0:
+        return grad
+    eig = 0.0
+    for axis, n in enumerate(grad.shape):
+        k = 2.0 - 2.0 * np.cos(2.0 * np.pi * np.arange(n) / n)  # eigenvalues of the 1D periodic Laplacian
+        eig = eig + k.reshape([-1 if a == axis else 1 for a in range(grad.ndim)])
+    return np.real(np.fft.ifftn(np.fft.fftn(grad) / (1.0 + lambda_ * eig)))
+
+
 # ---- scenes ---------------------------------------------------------------------------------------
 
 # Four views: three around the bunny, slightly from above, and one from below (no floor: the sky
@@ -232,7 +246,7 @@ def targets(bunny, size: int, views: int, spp: int = 256):
 
 def optimise(n: int = 32, size: int = 64, views: int = 4, iterations: int = 150, lr: float = 2e-3, k: int = 10,
              spp: int = 8, radius: float = 0.3, bunny=None, verbose: bool = True, chamfer_every: int = 10,
-             seed: int = 0, guiding: str = "none") -> dict:
+             seed: int = 0, guiding: str = "none", lambda_: float = 10.0) -> dict:
     """Optimise an n^3 sphere grid against the bunny's renders; redistance every k iterations (0: never).
     Returns the history (iteration, seconds, loss, Chamfer) and the scenes and grid at the end."""
     bunny = read_bunny() if bunny is None else bunny
@@ -269,7 +283,7 @@ def optimise(n: int = 32, size: int = 64, views: int = 4, iterations: int = 150,
         if it == iterations:
             break
         start = time.perf_counter()
-        opt.step(grad)
+        opt.step(smooth_gradient(grad, lambda_))
         if k and (it + 1) % k == 0:
             x[...] = redistance(x)
         for s in scenes:
