@@ -244,26 +244,46 @@ def targets(bunny, size: int, views: int, spp: int = 256):
 
 # ---- the optimisation -----------------------------------------------------------------------------
 
+def upsample(data: np.ndarray) -> np.ndarray:
+    """The same trilinear field on a grid with twice the voxels per axis (n -> 2n - 1 samples):
+    the old corners stay, the new ones are the interpolant's values (exact, the surface is unchanged)."""
+    a = data.astype(np.float64)
+    for axis in range(3):
+        a = _upsample(a, axis, 2)
+    return a.astype(data.dtype)
+
+
+def _sdf_scenes(grid, views, size):
+    scenes = [limn.load_dict(view({"type": "sdfgrid", "data": grid.astype(np.float32), "to_world": TO_WORLD}, o, size))
+              for o in ORIGINS[:views]]
+    for s in scenes:
+        s.set_differentiable(["obj.data"])
+    return scenes
+
+
 def optimise(n: int = 32, size: int = 64, views: int = 4, iterations: int = 150, lr: float = 2e-3, k: int = 10,
              spp: int = 8, radius: float = 0.3, bunny=None, verbose: bool = True, chamfer_every: int = 10,
-             seed: int = 0, guiding: str = "none", lambda_: float = 10.0) -> dict:
-    """Optimise an n^3 sphere grid against the bunny's renders; redistance every k iterations (0: never).
-    Returns the history (iteration, seconds, loss, Chamfer) and the scenes and grid at the end."""
+             seed: int = 0, guiding: str = "none", lambda_: float = 10.0, upsample_at=()) -> dict:
+    """Optimise an n^3 sphere grid against the bunny's renders: Adam on the Sobolev-preconditioned
+    gradient (:func:`smooth_gradient`, ``lambda_`` in voxels^2), redistancing every k iterations
+    (0: never), the grid upsampled (n -> 2n - 1, a fresh Adam) before each iteration in ``upsample_at``.
+    Returns the history (iteration, seconds, loss, Chamfer, grid size) and the scenes and grid at the end."""
     bunny = read_bunny() if bunny is None else bunny
     target_images = targets(bunny, size, views)
     truth_points = surface_points(bunny[0], bunny[1], n=3000, seed=0)
-    scenes = [limn.load_dict(view({"type": "sdfgrid", "data": sphere_grid(n, radius), "to_world": TO_WORLD}, o, size))
-              for o in ORIGINS[:views]]
     name = "obj.data"
-    for s in scenes:
-        s.set_differentiable([name])
-    x = scenes[0].params[name].astype(np.float64)
+    x = sphere_grid(n, radius).astype(np.float64)
+    scenes = _sdf_scenes(x, views, size)
     opt = optim.Adam(x, lr=lr)
     history = []
     t0 = time.perf_counter()
     timer = 0.0  # wall-clock seconds of the optimisation alone (Chamfer evaluations excluded)
     for it in range(iterations + 1):
         start = time.perf_counter()
+        if it in upsample_at:
+            x = upsample(x)
+            scenes = _sdf_scenes(x, views, size)
+            opt = optim.Adam(x, lr=lr)
         grad = np.zeros_like(x)
         loss = 0.0
         for v, (s, target) in enumerate(zip(scenes, target_images)):
@@ -273,11 +293,11 @@ def optimise(n: int = 32, size: int = 64, views: int = 4, iterations: int = 150,
             if it < iterations:
                 grad += s.render_backward(adjoint / len(scenes), spp=spp, seed=seed + 104729 * it + v, guiding=guiding)[name]
         timer += time.perf_counter() - start
-        record = {"iteration": it, "seconds": timer, "loss": loss, "chamfer": None}
+        record = {"iteration": it, "seconds": timer, "loss": loss, "chamfer": None, "n": x.shape[0]}
         if it % chamfer_every == 0 or it == iterations:
             record["chamfer"] = chamfer_error(x, truth_points)
             if verbose:
-                print(f"iteration {it:4d}  loss {loss:.5f}  Chamfer {record['chamfer']:.4f}  {timer:6.1f} s "
+                print(f"iteration {it:4d}  {x.shape[0]}^3  loss {loss:.5f}  Chamfer {record['chamfer']:.4f}  {timer:6.1f} s "
                       f"({time.perf_counter() - t0:.0f} s with the Chamfer evaluations)", flush=True)
         history.append(record)
         if it == iterations:

@@ -129,3 +129,15 @@ def test_smoothed_gradient_solves_the_sobolev_system():
     np.testing.assert_allclose(s + lam * lap, g, atol=1e-12)
     assert np.abs(s).max() < 0.5 * np.abs(g).max()  # it smooths
     assert so.smooth_gradient(g, 0.0) is g
+
+
+def test_upsampling_keeps_the_interpolant():
+    """n -> 2n - 1 samples: the fine grid's trilinear interpolant equals the coarse one everywhere
+    (inside a coarse voxel each fine voxel's interpolant is the same trilinear function)."""
+    rng = np.random.default_rng(4)
+    f = rng.standard_normal((5, 6, 7))
+    u = so.upsample(f)
+    assert u.shape == (9, 11, 13)
+    p = rng.random((500, 3))
+    np.testing.assert_allclose(interpolate(u, p), interpolate(f, p), atol=1e-12)
+    assert np.abs(interpolate(u[:, :, ::-1], p) - interpolate(f, p)).max() > 0.1  # the check can fail
