@@ -1,21 +1,28 @@
 """A sphere signed-distance grid recovers the Stanford bunny from four views (issue 37).
 
-    .venv/bin/python tests/bench/sdf_optimise.py --report docs/reports/sdf
+    python3 tests/bench/sdf_optimise.py --report docs/reports/sdf
+
+(limn installed; matplotlib for the plot: Debian's python3-matplotlib, which bootstrap.sh installs.)
+Writes optimisation.md, optimisation.png, the renders, the grid and the history to the folder.
 
 The target: the Stanford bunny (``bun_zipper_res3`` from Debian's ``opencv-doc``, committed as
 scenes/projective/bunny.ply by scenes/projective/make.py, which re-extracts it from the package
 with ``apt-get download opencv-doc`` when the file is missing), a diffuse mesh rendered from four
-views under a sun and a constant sky. The start: an ``sdfgrid`` sphere. Its grid values
-(``obj.data``) are optimised with limn's Adam (limn.optim.Adam) on the mean L2 image loss, with
-the derivatives limn computes for sdfgrid (interior + primary visibility + indirect boundary).
+views under a sun and a constant sky. The start: an ``sdfgrid`` sphere, 16^3, upsampled exactly
+to 31^3 after 60 iterations. Its grid values (``obj.data``) are optimised with limn's Adam
+(limn.optim.Adam) on the mean L2 image loss, with the derivatives limn computes for sdfgrid
+(interior + primary visibility + indirect boundary), the gradient smoothed by the Sobolev
+preconditioner (I + lambda L)^-1 of Large Steps on the grid (:func:`smooth_gradient`), which is
+the smoothness regulariser here.
 
 Redistancing (every ``k`` iterations) is a brute-force distance transform written here
 (:func:`redistance`): points on the zero set of the trilinear interpolant are found exactly on
-lines through the grid (the interpolant is linear along any line parallel to an axis, so each
-sign change on such a line is one exact root), and every grid value becomes the distance to the
-nearest of them with the old value's sign. Values of nodes next to the zero set (an edge to a
-neighbour changes sign) take the distance to the tangent plane at their nearest point instead
-(the point spacing would otherwise move the zero set by up to half that spacing). No scipy
+lines through the grid (along a line parallel to an axis the interpolant is linear inside each
+voxel, so each sign change between two samples of such a line is one exact root), and every grid
+value becomes the distance to the nearest of them with the old value's sign. Values of nodes next
+to the zero set (an edge to a neighbour changes sign) take the distance to the tangent plane at
+their nearest point instead (the point spacing would otherwise move the zero set by up to half
+that spacing). No scipy
 needed; scipy.spatial.cKDTree, when present, finds the same nearest points faster.
 
 The Chamfer error is the symmetric mean nearest-neighbour distance between points on the grid's
