@@ -146,9 +146,11 @@ def nearest(queries: np.ndarray, points: np.ndarray):
         d, j = cKDTree(points).query(queries)
         return j, d
     j = np.empty(len(queries), dtype=np.int64)
-    for s in range(0, len(queries), 256):
-        d2 = ((queries[s:s + 256, None, :] - points[None]) ** 2).sum(axis=2)
-        j[s:s + 256] = d2.argmin(axis=1)
+    pp = (points * points).sum(axis=1)
+    for s in range(0, len(queries), 512):
+        q = queries[s:s + 512]
+        # |q - p|^2 = |q|^2 - 2 q.p + |p|^2; |q|^2 is the same for every p: left out of the argmin
+        j[s:s + 512] = (pp[None, :] - 2.0 * (q @ points.T)).argmin(axis=1)
     return j, np.linalg.norm(queries - points[j], axis=1)
 
 
