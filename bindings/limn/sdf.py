@@ -77,15 +77,10 @@ def mesh_from_sdf(data, to_world, level: float = 0.0):
     local = verts[:, ::-1].astype(np.float64)  # (z, y, x) -> (x, y, z)
     world = local @ m[:3, :3].T + m[:3, 3]
     faces = faces.astype(np.int64)
-    # Reversing the axes mirrors the triangles' winding, as does a mirroring to_world; scikit-image's
-    # winding ('descent': the object is where values exceed the level) is the other side from ours.
-    # Orient by the enclosed signed volume of the local mesh's closed parts instead of reasoning
-    # about the three flips: its sign says which way the triangles face.
-    a, b, c = local[faces[:, 0]], local[faces[:, 1]], local[faces[:, 2]]
-    centre = local.mean(axis=0)
-    signed = np.einsum("ij,ij->i", a - centre, np.cross(b - centre, c - centre)).sum()
-    if signed < 0:
-        faces = faces[:, ::-1].copy()
+    # With scikit-image's default winding and the axes reversed to (x, y, z), the triangles face
+    # the inside of a surface with f < 0 inside; reversed, they face out (the enclosed volume's sign
+    # is checked in tests/python/test_sdf_from_mesh.py). A mirroring to_world reverses them again.
+    faces = faces[:, ::-1].copy()
     if np.linalg.det(m[:3, :3]) < 0:
         faces = faces[:, ::-1].copy()
     return world, faces
