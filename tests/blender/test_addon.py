@@ -947,7 +947,9 @@ def test_sdf_optimisation_grows_the_voxelised_ball_towards_the_target(addon, lim
     # 25 iterations cover about a third of the way (measured 2.70 from 2.10 towards 4.10): at least a
     # fifth, and no overshoot.
     assert v0 + 0.2 * (v_target - v0) < v1 < v_target, (v0, v1, v_target)
-    assert np.abs(c1 - c0).max() < 0.05, (c0, c1)   # a third of a 0.17 voxel
+    # The cameras look down from 65-68 degrees, so the lower half is seen less and grows less:
+    # measured 0.049 upwards in 4.5; within 0.1, 60 % of a 0.17 voxel.
+    assert np.abs(c1 - c0).max() < 0.1, (c0, c1)
 
     # The operator (background mode: blocking) from the panel's settings, as one undo step; a mesh
     # without faces is refused naming the object.
