@@ -4,7 +4,7 @@
     scene_dict["shape"] = {"type": "sdfgrid", "data": data, "to_world": to_world, ...}
     vertices, faces = limn.mesh_from_sdf(data, to_world)
 
-sdf_from_mesh voxelises in C++ (core/render/sdf_from_mesh.h: Embree point queries for the
+sdf_from_mesh voxelises in C++ (core/io/sdf_from_mesh.h: Embree point queries for the
 distance, ray parity along three directions for the sign); mesh_from_sdf is scikit-image's
 marching cubes (Debian: python3-skimage), placed with the grid's corner-sample convention."""
 from __future__ import annotations

@@ -9,7 +9,7 @@
 #include <exception>
 #include <functional>
 #include "core/diff/render_diff.h"
-#include "core/render/sdf_from_mesh.h"
+#include "core/io/sdf_from_mesh.h"
 #include "core/render/accel.h"
 #include "core/io/formats/image_io.h"
 #include "core/io/formats/mesh_io.h"

@@ -1,4 +1,5 @@
-// A signed-distance grid from a closed triangle mesh (issue 37): the input of an `sdfgrid` shape.
+// A signed-distance grid from a closed triangle mesh (issue 37): the input of an `sdfgrid` shape
+// (in io: it prepares input and uses render's Embree device and RenderCancelled).
 //
 // Distance: the closest point on the triangles, found with Embree point queries (rtcPointQuery over
 // a BVH of the triangles, the query radius shrinking to the best distance so far). Sign: ray parity,

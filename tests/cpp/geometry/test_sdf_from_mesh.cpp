@@ -1,11 +1,11 @@
-// sdf_from_mesh (core/render/sdf_from_mesh.h): signed distances of a closed mesh against analytic
+// sdf_from_mesh (core/io/sdf_from_mesh.h): signed distances of a closed mesh against analytic
 // answers (a box: exact; a sphere mesh: within its Hausdorff distance to the sphere), the grid's
 // layout, and bad input refused with errors that say what is wrong.
 #include <doctest/doctest.h>
 
 #include <cmath>
 #include <stdexcept>
-#include "core/render/sdf_from_mesh.h"
+#include "core/io/sdf_from_mesh.h"
 #include "core/render/integrators/render.h"
 
 using namespace limn;

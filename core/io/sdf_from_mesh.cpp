@@ -1,4 +1,4 @@
-#include "core/render/sdf_from_mesh.h"
+#include "core/io/sdf_from_mesh.h"
 
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
