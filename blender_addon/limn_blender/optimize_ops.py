@@ -184,6 +184,7 @@ class Problem:
             scene.camera = saved_camera
         if self.sdf is not None:
             self.name = f"{obj.name}.data"
+            self._shape_id = obj.name  # prepare() runs on the worker thread and must not read bpy
             self.faces = None  # no Large Steps on a grid
             self._refs = self._make_refs()
             return
@@ -215,7 +216,7 @@ class Problem:
         self.sdf.voxelise(self.limn, report)
         for desc, source, pixels in self._pending:
             desc = dict(desc)
-            desc[self.obj.name] = self.sdf.shape(desc[self.obj.name])
+            desc[self._shape_id] = self.sdf.shape(desc[self._shape_id])
             self.views.append((self.limn.load_dict(desc, source=source), pixels))
         self._pending = []
 

@@ -33,6 +33,7 @@ class SdfSource:
         if not 2 <= int(resolution) <= 1024:
             raise ValueError(f"object '{obj.name}': SDF resolution must be within [2, 1024] samples (got {resolution})")
         self.obj = obj
+        self.label = f"object '{obj.name}'"  # for errors raised on the worker thread, which never touches bpy
         self.resolution, self.padding = int(resolution), float(padding)
         mesh = obj.data
         mesh.calc_loop_triangles()
@@ -51,15 +52,15 @@ class SdfSource:
         self.voxel = 0.0
 
     def voxelise(self, limn, progress=None) -> None:
-        """limn.sdf_from_mesh on the world-space triangles; errors name the object."""
+        """limn.sdf_from_mesh on the world-space triangles (any thread: no bpy); errors name the object."""
         g = limn.sdf_from_mesh(self.vertices, self.faces, self.resolution, self.padding, progress=progress,
-                               name=f"object '{self.obj.name}'")
+                               name=self.label)
         self.data, self.to_world, self.voxel = g.data, g.to_world, g.voxel
 
     def shape(self, exported: dict) -> dict:
         """The sdfgrid that replaces the exported mesh shape (its material kept)."""
         if "emitter" in exported:
-            raise ValueError(f"object '{self.obj.name}': its material emits light, and a limn SDF cannot be an area emitter")
+            raise ValueError(f"{self.label}: its material emits light, and a limn SDF cannot be an area emitter")
         return {"type": "sdfgrid", "data": self.data, "to_world": self.to_world.tolist(), "bsdf": exported["bsdf"]}
 
     def write_back(self, limn, data) -> None:
