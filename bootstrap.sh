@@ -19,7 +19,7 @@ quiet() { "$@" >"$LOG" 2>&1 || { cat "$LOG"; say "failed: $*"; exit 1; }; }
 # --- 1. Debian packages --------------------------------------------------------------------------
 PACKAGES=(build-essential cmake ninja-build pkg-config libembree-dev libopenimageio-dev openimageio-tools
           libopenexr-dev libglm-dev doctest-dev libtbb-dev libeigen3-dev nlohmann-json3-dev
-          python3 python3-dev python3-venv python3-pip python3-numpy python3-pytest python3-matplotlib blender
+          python3 python3-dev python3-venv python3-pip python3-numpy python3-pytest python3-matplotlib python3-skimage blender
           clang-14 libclang-rt-14-dev xvfb xauth imagemagick xdotool)
 missing=()
 for p in "${PACKAGES[@]}"; do

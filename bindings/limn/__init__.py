@@ -15,6 +15,8 @@ from .scene import Parameters, Scene, load, load_dict
 from .images import read_image, write_image, write_ply
 from .fd import fd
 from . import optim
+from .sdf import MeshSdf, mesh_from_sdf, sdf_from_mesh
 
 __version__ = "0.1.0"
-__all__ = ["Scene", "Parameters", "load", "load_dict", "read_image", "write_image", "write_ply", "fd", "optim", "RenderCancelled"]
+__all__ = ["Scene", "Parameters", "load", "load_dict", "read_image", "write_image", "write_ply", "fd", "optim", "RenderCancelled",
+           "sdf_from_mesh", "mesh_from_sdf", "MeshSdf"]

@@ -9,6 +9,7 @@
 #include <exception>
 #include <functional>
 #include "core/diff/render_diff.h"
+#include "core/io/sdf_from_mesh.h"
 #include "core/render/accel.h"
 #include "core/io/formats/image_io.h"
 #include "core/io/formats/mesh_io.h"
@@ -372,6 +373,24 @@ PYBIND11_MODULE(_core, m) {
         if (f.ndim() != 2 || f.shape(1) != 3) throw std::invalid_argument("write_ply: faces must have shape (F, 3)");
         write_ply(path, std::vector<float>(v.data(), v.data() + v.size()), std::vector<uint32_t>(f.data(), f.data() + f.size()));
       }, py::arg("path"), py::arg("positions"), py::arg("faces"));
+  m.def("sdf_from_mesh", [](py::array_t<double, py::array::c_style | py::array::forcecast> v,
+                            py::array_t<int64_t, py::array::c_style | py::array::forcecast> f, int resolution, double padding,
+                            const std::string& what, py::object progress) {
+        if (v.ndim() != 2 || v.shape(1) != 3)
+          throw std::invalid_argument("sdf_from_mesh: " + what + ": vertices must have shape (N, 3)");
+        if (f.ndim() != 2 || f.shape(1) != 3) throw std::invalid_argument("sdf_from_mesh: " + what + ": faces must have shape (F, 3)");
+        std::vector<double> vertices(v.data(), v.data() + v.size());
+        std::vector<int64_t> faces(f.data(), f.data() + f.size());
+        std::exception_ptr error;
+        auto callback = progress_adapter(progress, error);
+        SdfFromMesh g = run_released(error, [&] { return sdf_from_mesh(vertices, faces, resolution, padding, what, callback); });
+        auto* owned = new std::vector<float>(std::move(g.values));
+        py::capsule free_when_done(owned, [](void* p) { delete static_cast<std::vector<float>*>(p); });
+        py::array_t<float> data({py::ssize_t(g.nz), py::ssize_t(g.ny), py::ssize_t(g.nx)}, owned->data(), free_when_done);
+        return py::make_tuple(data, py::make_tuple(g.origin[0], g.origin[1], g.origin[2]),
+                              py::make_tuple(g.extent[0], g.extent[1], g.extent[2]), g.voxel, g.sign_disagreements);
+      }, py::arg("vertices"), py::arg("faces"), py::arg("resolution"), py::arg("padding"), py::arg("what"),
+      py::arg("progress") = py::none());
   m.def("embree_error_count", &EmbreeDevice::error_count);
   m.def("diff_option_defaults", &diff_option_defaults, "Derivative options and their defaults (DiffOptions)");
 

@@ -1,5 +1,6 @@
 """limn for Blender: render the scene with the limn differentiable renderer and optimise a mesh
-(its vertices, or its heights as a limn heightfield) so that its renders match target images.
+(its vertices, its heights as a limn heightfield, or a signed-distance grid voxelised from it)
+so that its renders match target images.
 
 Registers as a legacy add-on in Blender 3.x (bl_info) and as an extension in 4.2+
 (blender_manifest.toml). Scripts can call ``render(...)`` and ``export_scene(...)`` directly."""
@@ -53,7 +54,16 @@ class LimnSettings(bpy.types.PropertyGroup):
                                   "modifier; vertices otherwise"),
                ("MESH", "Mesh vertices", "Move the mesh's vertices"),
                ("HEIGHTFIELD", "Heightfield", "Optimise heights: the image of a plane's Displace modifier, or the z of "
-                                              "a regular grid mesh")])
+                                              "a regular grid mesh"),
+               ("SDF", "Signed distance grid", "Voxelise the closed mesh into a limn SDF, optimise the grid and write "
+                                               "it back as a mesh (marching cubes; replaces the mesh's vertices and faces)")])
+    sdf_resolution: bpy.props.IntProperty(
+        name="SDF resolution", default=32, min=2, max=1024, soft_max=128,
+        description="SDF mode: grid samples along the mesh's longest side (cubic voxels); memory and time grow with its cube")
+    sdf_padding: bpy.props.FloatProperty(
+        name="SDF padding", default=0.1, min=0.0, max=10.0,
+        description="SDF mode: room around the mesh inside the grid, as a share of its longest side (the shape cannot "
+                    "grow beyond the grid)")
     mask_vertex_group: bpy.props.StringProperty(
         name="Mask group", description="Heightfield of a grid mesh: heights of vertices with zero weight (or outside "
                                        "the group) stay fixed")
@@ -89,7 +99,10 @@ class LIMN_PT_render(bpy.types.Panel):
         obj = s.optimize_object
         if obj is not None:
             box.prop(obj, "limn_heightfield")
-        if s.optimize_mode != "MESH":
+        if s.optimize_mode == "SDF":
+            box.prop(s, "sdf_resolution")
+            box.prop(s, "sdf_padding")
+        elif s.optimize_mode != "MESH":
             if obj is not None:
                 box.prop_search(s, "mask_vertex_group", obj, "vertex_groups")
             box.prop(s, "mask_image")

@@ -19,7 +19,12 @@ an image Displace modifier (the heights go back into the image, a float image pa
 .blend) or a regular grid mesh (the heights go back into the vertices' z). Mode "AUTO" picks it for
 objects marked as limn heightfields and for meshes with an image Displace modifier. A vertex group
 (grid meshes) or a mask image can hold heights fixed where they are zero.
-    limn_blender.optimize(plane, [(camera, image), ...], mode="HEIGHTFIELD", mask_image=img)"""
+    limn_blender.optimize(plane, [(camera, image), ...], mode="HEIGHTFIELD", mask_image=img)
+
+SDF mode (sdf.py) voxelises a closed mesh into a limn signed-distance grid (`sdf_resolution`
+samples along its longest side), optimises the grid's values and writes the result back into the
+mesh by marching cubes (its vertices and faces are replaced; one undo step restores them).
+    limn_blender.optimize(obj, [(camera, image), ...], mode="SDF", sdf_resolution=32)"""
 from __future__ import annotations
 
 import threading
@@ -28,7 +33,7 @@ import time
 import bpy
 import numpy as np
 
-from . import exporter, heightfield, jobs
+from . import exporter, heightfield, jobs, sdf
 from .render_ops import _limn, end_worker, redraw_panels, start_modal
 
 
@@ -66,7 +71,7 @@ def _unsaved(image) -> bool:
     return not isinstance(image, str) and image.source == "GENERATED" and image.packed_file is None
 
 
-MODES = ("AUTO", "MESH", "HEIGHTFIELD")
+MODES = ("AUTO", "MESH", "HEIGHTFIELD", "SDF")
 
 
 def _unpack_target(i: int, entry):
@@ -102,7 +107,8 @@ def _check_light_setup(i: int, cam, image, lights) -> None:
 
 
 def resolve_mode(obj, mode: str) -> str:
-    """Returns "MESH" or "HEIGHTFIELD" for the object and the chosen mode ("AUTO", "MESH", "HEIGHTFIELD")."""
+    """Returns "MESH", "HEIGHTFIELD" or "SDF" for the object and the chosen mode (one of MODES; "AUTO"
+    never picks "SDF")."""
     if mode not in MODES:
         raise ValueError(f"optimisation mode must be one of {', '.join(MODES)} (got {mode!r})")
     if mode != "AUTO":
@@ -114,9 +120,11 @@ def resolve_mode(obj, mode: str) -> str:
 class Problem:
     """The optimisation problem built from the Blender scene (main thread only): the limn scene and
     target per camera, the parameter `name`, the Large-Steps `faces`, the `mask` (or None) and
-    write_back(x) for the mesh vertices or the heightfield's heights."""
+    write_back(x) for the mesh vertices, the heightfield's heights or the SDF grid's values.
+    prepare() (any thread; SDF mode voxelises there) must run before the views are used."""
 
-    def __init__(self, obj, targets, spp: int, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None):
+    def __init__(self, obj, targets, spp: int, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None,
+                 sdf_resolution: int = 32, sdf_padding: float = 0.1):
         if obj is None or obj.type != "MESH":
             raise ValueError("choose a mesh object to optimise")
         if not targets:
@@ -128,8 +136,9 @@ class Problem:
         if self.mode == "MESH" and getattr(obj, "limn_heightfield", False):
             raise ValueError(f"object '{obj.name}' is marked as a limn heightfield; choose the heightfield mode or "
                              "clear the mark to optimise its vertices")
-        if self.mode == "MESH" and (mask_vertex_group or mask_image is not None):
-            raise ValueError(f"object '{obj.name}' is optimised as mesh vertices; masks (vertex group, mask image) "
+        if self.mode in ("MESH", "SDF") and (mask_vertex_group or mask_image is not None):
+            what = "mesh vertices" if self.mode == "MESH" else "a signed-distance grid"
+            raise ValueError(f"object '{obj.name}' is optimised as {what}; masks (vertex group, mask image) "
                              "are for the heightfield mode")
         self.limn = _limn()
         self.obj = obj
@@ -139,9 +148,13 @@ class Problem:
         # Heights and mask first: a non-grid mesh, a bad Displace set-up or mask fails before any export.
         self.source = heightfield.Source(obj) if self.mode == "HEIGHTFIELD" else None
         self.mask = self.source.mask(mask_vertex_group, mask_image) if self.source else None
+        # SDF: the world-space triangles now; voxelised in prepare() (on the worker thread).
+        self.sdf = sdf.SdfSource(obj, sdf_resolution, sdf_padding) if self.mode == "SDF" else None
+        self.prepare_fraction = 0.0
         scene = bpy.context.scene
         saved_camera = scene.camera
         self.views = []
+        self._pending = []  # SDF: (description, source, target) per view, loaded in prepare()
         try:
             for cam, target, lights in targets:
                 if cam is None or cam.type != "CAMERA":
@@ -153,12 +166,28 @@ class Problem:
                     raise ValueError(f"object '{obj.name}' was not exported as one shape (hidden, or several materials?)")
                 shape = desc[obj.name]
                 lit = f" lights '{lights.name}'" if lights is not None else ""
-                lscene = self.limn.load_dict(desc, source=f"blender '{scene.name}' camera '{cam.name}'{lit}")
                 r = scene.render
                 w, h = int(r.resolution_x * r.resolution_percentage / 100), int(r.resolution_y * r.resolution_percentage / 100)
-                self.views.append((lscene, _target_pixels(target, w, h, self.limn)))
+                pixels = _target_pixels(target, w, h, self.limn)
+                source = f"blender '{scene.name}' camera '{cam.name}'{lit}"
+                if self.sdf is not None:
+                    if "emitter" in shape:
+                        raise ValueError(f"object '{obj.name}': its material emits light, and a limn SDF cannot be "
+                                         "an area emitter")
+                    if shape.get("type") != "mesh":
+                        raise ValueError(f"object '{obj.name}' is exported as a limn {shape.get('type')}, not a mesh; "
+                                         "clear its limn heightfield mark to optimise it as an SDF")
+                    self._pending.append((desc, source, pixels))
+                    continue
+                self.views.append((self.limn.load_dict(desc, source=source), pixels))
         finally:
             scene.camera = saved_camera
+        if self.sdf is not None:
+            self.name = f"{obj.name}.data"
+            self._shape_id = obj.name  # prepare() runs on the worker thread and must not read bpy
+            self.faces = None  # no Large Steps on a grid
+            self._refs = self._make_refs()
+            return
         if self.source is not None:
             src = self.source
             self.name = f"{obj.name}.heights"
@@ -174,6 +203,22 @@ class Problem:
                              f"({n} in the mesh, {len(welded)} rendered); apply or remove them before optimising")
         self.world = np.array([list(row) for row in obj.matrix_world], dtype=np.float64)
         self._refs = self._make_refs()
+
+    def prepare(self, progress=None) -> None:
+        """SDF mode: voxelises the mesh (progress(fraction) may return False to cancel: limn raises
+        RenderCancelled) and loads the views with the grid in place of the mesh. Needs no bpy, so
+        it runs on the worker thread; a no-op in the other modes and when already done."""
+        if not self._pending:
+            return
+        def report(fraction):
+            self.prepare_fraction = fraction
+            return True if progress is None else progress(fraction)
+        self.sdf.voxelise(self.limn, report)
+        for desc, source, pixels in self._pending:
+            desc = dict(desc)
+            desc[self._shape_id] = self.sdf.shape(desc[self._shape_id])
+            self.views.append((self.limn.load_dict(desc, source=source), pixels))
+        self._pending = []
 
     # ---- the datablocks the run writes: still there, still the same? ---------------------------------
     def _make_refs(self):
@@ -212,7 +257,7 @@ class Problem:
             return f"object '{name}' uses another mesh now"
         if obj.mode == "EDIT" or mesh.is_editmode:
             return f"object '{name}' entered Edit Mode (its mesh is not written while it is edited)"
-        if (self.source is None or self.source.kind == "grid") and len(mesh.vertices) != self.vertex_count:
+        if self.sdf is None and (self.source is None or self.source.kind == "grid") and len(mesh.vertices) != self.vertex_count:
             return f"mesh '{mesh.name}' has {len(mesh.vertices)} vertices now ({self.vertex_count} at the start)"
         if self.source is not None and self.source.kind == "displace":
             m = heightfield.displace_modifier(obj)
@@ -225,11 +270,18 @@ class Problem:
         self.obj = obj
         if self.source is not None:
             self.source.obj = obj
+        if self.sdf is not None:
+            self.sdf.obj = obj
         return ""
 
     def write_back(self, x: np.ndarray, final: bool = True) -> None:
-        """Stores the parameter's value in Blender: world-space vertices into the mesh, or heights
-        into the displacement image (packed when `final`) / the grid's z."""
+        """Stores the parameter's value in Blender: world-space vertices into the mesh, heights
+        into the displacement image (packed when `final`) / the grid's z, or the SDF grid as the
+        mesh its marching cubes give."""
+        if self.sdf is not None:
+            self.sdf.write_back(self.limn, x)
+            self.vertex_count = len(self.obj.data.vertices)
+            return
         if self.source is not None:
             self.source.write_back(x, final=final)
             self._refs = self._make_refs()  # a new "<name> (limn)" image may have replaced the texture's
@@ -241,14 +293,17 @@ class Problem:
 
 
 def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01, lambda_: float = 20.0,
-             progress=None, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None) -> dict:
-    """Blocking optimisation; writes the result into the mesh (or the heightfield's image / grid).
-    progress(iteration, loss) may return False to stop. Returns {"losses": [...], "seconds": ...,
-    "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD"}."""
-    problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image)
+             progress=None, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None,
+             sdf_resolution: int = 32, sdf_padding: float = 0.1) -> dict:
+    """Blocking optimisation; writes the result into the mesh (or the heightfield's image / grid,
+    or the SDF's marching cubes into the mesh). progress(iteration, loss) may return False to stop.
+    Returns {"losses": [...], "seconds": ..., "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD" |
+    "SDF"}; SDF mode adds "sdf_shape" (nz, ny, nx) and "voxel" (world units)."""
+    problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image, sdf_resolution, sdf_padding)
     running = jobs.busy(problem.keys)
     if running is not None:  # a job in the UI writes the same object
         raise jobs.JobBusy(running)
+    problem.prepare()
 
     def callback(it, loss, x):
         return None if progress is None else progress(it, loss)
@@ -257,8 +312,11 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
     result = problem.limn.optim.fit(problem.views, problem.name, iterations=iterations, lr=lr, lambda_=lambda_, spp=spp,
                                     faces=problem.faces, mask=problem.mask, callback=callback)
     problem.write_back(problem.views[0][0].params[problem.name])
-    return {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled,
-            "mode": problem.mode}
+    out = {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled,
+           "mode": problem.mode}
+    if problem.sdf is not None:
+        out.update(sdf_shape=tuple(problem.sdf.data.shape), voxel=problem.sdf.voxel)
+    return out
 
 
 class _Cancellable:
@@ -314,8 +372,9 @@ class OptimizeJob(jobs.Job):
                 state["it"], state["loss"], state["x"] = it, loss, x.copy()
             return self.keep_going()
 
-        views = [(_Cancellable(scene, self.keep_going), target) for scene, target in problem.views]
         try:
+            problem.prepare(self.keep_going)  # SDF: voxelise here, off the main thread
+            views = [(_Cancellable(scene, self.keep_going), target) for scene, target in problem.views]
             problem.limn.optim.fit(views, problem.name, iterations=self.iterations, spp=spp, lr=lr, lambda_=lambda_,
                                    faces=problem.faces, mask=problem.mask, callback=callback)
         except problem.limn.RenderCancelled:
@@ -331,7 +390,12 @@ class OptimizeJob(jobs.Job):
         why = self.problem.check()
         if why:
             return why
-        self.problem.write_back(x, final=final)
+        try:
+            self.problem.write_back(x, final=final)
+        except ValueError as e:  # SDF: a grid without a surface has no mesh to write
+            if self.error is None:
+                self.error = e
+            return str(e)
         self._written = it
         self.writes += 1
         return ""
@@ -355,6 +419,8 @@ class OptimizeJob(jobs.Job):
         with self._lock:
             it, loss, x = self._state["it"], self._state["loss"], self._state["x"]
         progress = f"iteration {it + 1}/{self.iterations}, loss {loss:.6f}"
+        if it < 0 and self.problem.sdf is not None:
+            progress = f"voxelising the mesh ({100 * self.problem.prepare_fraction:.0f} %)"
         self.status_text = progress
         why = "" if self.discard else self.problem.check()
         if why:  # never write into what the run no longer owns; stop the worker now
@@ -412,6 +478,8 @@ def _mode_inputs(s) -> dict:
     masks in mesh mode, so they are not passed then)."""
     if s.optimize_mode == "MESH":
         return {"mode": "MESH"}
+    if s.optimize_mode == "SDF":
+        return {"mode": "SDF", "sdf_resolution": s.sdf_resolution, "sdf_padding": s.sdf_padding}
     return {"mode": s.optimize_mode, "mask_vertex_group": s.mask_vertex_group, "mask_image": s.mask_image}
 
 
