@@ -84,9 +84,10 @@ struct CreasePoint {
 bool crease_point(const SdfGrid& g, const Face& face, int along, double r, CreasePoint& out, bool clamp_inside = true);
 
 // The contour seen from e (grid coordinates; a direction when `directional`) in voxel v on the
-// graph of `axis`: the roots b of (x(a, b) - e) . grad f = 0 (or e . grad f) at coordinate a, where
-// the surface point is inside the voxel; at most `max` of them, ordered.
-int contour_roots(const SdfGrid& g, uint32_t v, int axis, double a, const Vec3d& e, bool directional, double* b_out, int max);
+// graph x(a, b) of `axis`: the roots of (x(a, b) - e) . grad f = 0 (or e . grad f) along the line
+// where graph coordinate `held` (0: a, 1: b) equals `at`, where the surface point is inside the
+// voxel; the other coordinate of at most `max` of them, ordered.
+int contour_roots(const SdfGrid& g, uint32_t v, int axis, int held, double at, const Vec3d& e, bool directional, double* out, int max);
 
 // Success counters of the projection (all threads; for reports).
 struct ProjectionStats {
