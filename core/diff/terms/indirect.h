@@ -18,9 +18,12 @@
 // is evaluated as a term of its own (shadow edges and sphere shadow outlines of delta lights).
 //
 // Creases of flat-shaded meshes need no term here: in the material form they stay where they are.
-// Not covered: camera connections through delta BSDFs (docs/derivatives.md).
+// Camera connections through delta vertices: through stacks of parallel flat dielectric
+// interfaces (glass slabs; core/diff/terms/delta_chains.h), not through mirrors or curved glass
+// (docs/derivatives.md).
 #pragma once
 #include "core/diff/terms/boundary_space.h"
+#include "core/diff/terms/delta_chains.h"
 #include "core/math/rng.h"
 
 namespace limn {
@@ -31,6 +34,7 @@ class IndirectBoundary {
 
   bool empty() const { return m_space.empty(); }
   const BoundarySpace& space() const { return m_space; }
+  size_t refraction_stacks() const { return m_stacks.size(); }  // camera connections through flat glass
 
   // One boundary sample at the point u of the boundary sample space [0,1)^3, chosen with density
   // pdf_u (pdf_u0: density of u.x alone, used by the delta-light terms that ignore u.y, u.z). Every
@@ -58,6 +62,7 @@ class IndirectBoundary {
   const DiffParams& m_params;
   BoundarySpace m_space;
   std::vector<int> m_delta_lights;
+  std::vector<RefractionStack> m_stacks;
   int m_max_depth;
 };
 
