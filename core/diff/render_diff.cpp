@@ -118,6 +118,9 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
     if (indirect->refraction_stacks())
       s.push_back("indirect boundary: camera connections also through " + std::to_string(indirect->refraction_stacks()) +
                   " stacks of parallel flat glass interfaces");
+    if (indirect->mirror_chains())
+      s.push_back("indirect boundary: camera connections also through " + std::to_string(indirect->mirror_chains()) +
+                  " chains of planar mirror reflections");
   }
   return s;
 }

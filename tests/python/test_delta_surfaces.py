@@ -121,3 +121,14 @@ def test_shadow_seen_directly_where_the_glass_was():
     """Positive control for the test above: the same protocol without the slab."""
     d = glass_scene(glass=False)
     check_term(d, "box.vertex_positions", y_translation(d, "box.vertex_positions"), "boundary", 256, 10)
+
+
+@pytest.mark.term("boundary")
+def test_shadow_seen_in_a_plane_mirror():
+    """The same shadow seen in a silver mirror on the ceiling from a camera looking up: the
+    indirect term's camera connections go to the mirror's virtual camera (times silver's
+    Fresnel reflectance). The positive control is test_shadow_seen_directly_where_the_glass_was
+    (the same floor seen from above without the slab)."""
+    d = scene_json(VALIDATION, "shadow_in_mirror")
+    summary = check_term(d, "box.vertex_positions", y_translation(d, "box.vertex_positions"), "boundary", 256, 10)
+    assert any("through 1 chains of planar mirror reflections" in line and line.startswith("indirect") for line in summary), summary

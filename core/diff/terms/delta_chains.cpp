@@ -4,6 +4,7 @@
 #include <map>
 #include <set>
 #include "core/render/bsdfs/fresnel.h"
+#include "core/math/frame.h"
 
 namespace limn {
 namespace {
@@ -159,10 +160,17 @@ DeltaChains find_delta_chains(const Scene& scene, const DiffParams& params) {
         continue;
       }
       Mat4d m = scene.camera.world_from_camera.matrix();
-      for (int q : ranked[v].second) m = reflection(planes[q].n(), planes[q].d()) * m;
+      MirrorChain mc;
+      for (int q : ranked[v].second) {
+        m = reflection(planes[q].n(), planes[q].d()) * m;
+        mc.n.push_back(planes[q].n());
+        mc.d.push_back(planes[q].d());
+        mc.shapes.push_back(planes[q].shape);
+      }
       Camera c = scene.camera;
       c.world_from_camera = Transform(m);
       out.mirror_cameras.push_back(c);
+      out.mirror_chains.push_back(mc);
     }
   }
   {  // refraction stacks: parallel planes, the same medium at both ends
@@ -287,6 +295,41 @@ bool connect_through_stack(const Scene& scene, const RefractionStack& st, const 
   d_last_out = Vec3(d_last);
   transmittance = T;
   return std::isfinite(domega_dA) && domega_dA > 0.0;
+}
+
+bool connect_through_mirrors(const Scene& scene, const MirrorChain& chain, const Vec3& eye_virtual, const SurfaceInteraction& si,
+                             Spectrum& reflectance, uint64_t& rays) {
+  const Vec3 eye = scene.camera.world_from_camera.point(Vec3(0.0f));
+  Vec3 d = glm::normalize(eye_virtual - si.p);
+  Ray ray = spawn_ray(si, d);
+  Spectrum R(1.0f);
+  for (size_t i = chain.shapes.size(); i-- > 0;) {
+    SurfaceInteraction c;
+    rays++;
+    if (!scene.intersect(ray, c) || c.shape != chain.shapes[i]) return false;
+    // 1e-4: the hit agrees with the plane to float rounding of the scene's scale.
+    if (std::abs(glm::dot(chain.n[i], Vec3d(c.p)) - chain.d[i]) > 1e-4 * (1.0 + glm::length(Vec3d(c.p)))) return false;
+    const Bsdf& bsdf = scene.bsdfs[scene.shapes[c.shape].bsdf];
+    const float cos_i = glm::dot(-d, c.ng);  // towards where the light came from
+    if (const auto* m = std::get_if<Conductor>(&bsdf.model)) {
+      if (cos_i <= 0.0f && !bsdf.twosided) return false;  // one-sided conductors reflect on the front only
+      R *= m->specular_reflectance * fresnel_conductor(std::abs(cos_i), m->eta, m->k);
+    } else if (const auto* g = std::get_if<Dielectric>(&bsdf.model)) {
+      R *= g->specular_reflectance * fresnel_dielectric(cos_i, g->eta).F;
+    } else {
+      return false;
+    }
+    d = reflect(-d, c.ng);
+    ray = spawn_ray(c, d);
+  }
+  // The last segment reaches the eye (1e-4: the eye is a point, not an occluder).
+  const Vec3 to_eye = eye - ray.o;
+  const float dist = glm::length(to_eye);
+  if (glm::dot(to_eye / dist, d) < 1.0f - 1e-5f) return false;  // the chain's planes were not these (1e-5: float directions)
+  rays++;
+  if (scene.occluded(Ray{ray.o, to_eye / dist, 0.0f, dist * (1.0f - 1e-4f)})) return false;
+  reflectance = R;
+  return !is_black(R);
 }
 
 }  // namespace limn

@@ -25,8 +25,16 @@ struct RefractionStack {
   std::vector<int> shapes;      // the shape of each plane
 };
 
+// One planar mirror chain: its planes in the order the camera meets them.
+struct MirrorChain {
+  std::vector<Vec3d> n;  // unit normals (the shapes' geometric ones)
+  std::vector<double> d;  // plane offsets n . x
+  std::vector<int> shapes;
+};
+
 struct DeltaChains {
   std::vector<Camera> mirror_cameras;
+  std::vector<MirrorChain> mirror_chains;  // the same chains' planes
   std::vector<RefractionStack> stacks;
   std::vector<std::string> notes;
 };
@@ -39,5 +47,12 @@ DeltaChains find_delta_chains(const Scene& scene, const DiffParams& params);
 // equal end media). False when no such path exists or something blocks it.
 bool connect_through_stack(const Scene& scene, const RefractionStack& stack, const SurfaceInteraction& si, Vec3& d_eye, Vec3& d_last,
                            double& domega_dA, Spectrum& transmittance, uint64_t& rays);
+
+// Whether the segment from surface point `si` towards the chain's virtual eye `eye_virtual` is
+// the reflection path to the camera: it meets the chain's planes in reverse order on their
+// shapes, each a delta surface, and then reaches the eye unblocked. `reflectance` is the product
+// of the delta reflections' values (Fresnel times specular_reflectance).
+bool connect_through_mirrors(const Scene& scene, const MirrorChain& chain, const Vec3& eye_virtual, const SurfaceInteraction& si,
+                             Spectrum& reflectance, uint64_t& rays);
 
 }  // namespace limn
