@@ -75,6 +75,20 @@ def test_sphere_seen_in_a_plane_mirror(name, t):
 
 
 @pytest.mark.term("primary")
+def test_cube_seen_in_a_plane_mirror():
+    """A tilted flat-shaded cube in place of the sphere: mesh silhouette edges (and creases) seen
+    in the mirror, both sides probed."""
+    d = mirror_scene()
+    del d["ball"]
+    d["box"] = {"type": "cube", "to_world": [{"scale": 0.2}, {"rotate": {"axis": [0.3, 1, 0.2], "angle": 30}},
+                                             {"translate": [0.1, -0.5, 1.0]}],
+                "bsdf": {"type": "diffuse", "reflectance": 0.2}}
+    t = np.zeros_like(load_in(VALIDATION, d).params["box.vertex_positions"])
+    t[:, 0] = 1.0
+    check_term(d, "box.vertex_positions", t, "primary", 64, 10)
+
+
+@pytest.mark.term("primary")
 def test_sphere_seen_directly_where_the_mirror_shows_it():
     """Positive control for the test above: the same protocol on the unfolded scene."""
     check_term(unfolded_scene(), "ball.center", np.float32([1.0, 0.0, 0.0]), "primary", 64, 10)

@@ -58,6 +58,41 @@ TEST_CASE("delta chains: a tilted flat mirror's virtual camera projects through 
   CHECK(checked > 20);
 }
 
+TEST_CASE("delta chains: a periscope of two mirrors composes the reflections in the camera's order") {
+  // Mirror 1 sends the camera's downward rays along +y, mirror 2 sends them up.
+  auto scene = load(R"("m1": {"type": "rectangle", "to_world": [{"scale": 0.6}, {"rotate": {"axis": [1, 0, 0], "angle": -45}}, {"translate": [0, 0, 1]}],
+                        "bsdf": {"type": "conductor"}},
+                       "m2": {"type": "rectangle", "to_world": [{"scale": 0.6}, {"rotate": {"axis": [1, 0, 0], "angle": 45}}, {"translate": [0, 2, 1]}],
+                        "bsdf": {"type": "conductor"}})");
+  const DiffParams params(*scene, {"ball.center"});
+  const DeltaChains chains = find_delta_chains(*scene, params);
+  REQUIRE(chains.mirror_cameras.size() == 2);
+  REQUIRE(chains.mirror_chains.size() == 2);
+  size_t two = chains.mirror_chains[0].shapes.size() == 2 ? 0 : 1;
+  REQUIRE(chains.mirror_chains[two].shapes.size() == 2);
+  CHECK(scene->shapes[size_t(chains.mirror_chains[two].shapes[0])].id == "m1");
+  const FilmProjection virt(chains.mirror_cameras[two]);
+  Pcg32 rng(5, 3);
+  int checked = 0;
+  for (int i = 0; i < 400; ++i) {
+    const Vec3 x(0.8f * rng.next_float() - 0.4f, 1.6f + 0.8f * rng.next_float(), 1.8f + 1.5f * rng.next_float());  // above mirror 2
+    glm::dvec2 film;
+    double unused;
+    if (!virt.film_position(x, 1.0, film, unused) || !scene->camera.film_covers(film.x, film.y)) continue;
+    Ray r = scene->camera.generate_ray(Vec2(float(film.x), float(film.y)));
+    SurfaceInteraction a, b;
+    if (!scene->intersect(r, a) || scene->shapes[a.shape].id != "m1") continue;
+    const Vec3 d1 = reflect(-r.d, a.ng);
+    if (!scene->intersect(spawn_ray(a, d1), b) || scene->shapes[b.shape].id != "m2") continue;
+    const Vec3 d2 = reflect(-d1, b.ng);
+    const Vec3 rel = x - b.p;
+    CHECK(glm::length(rel - glm::dot(rel, d2) * d2) < 1e-5f * (1.0f + glm::length(rel)));  // float film positions and hits
+    CHECK(glm::dot(rel, d2) > 0.0f);
+    checked++;
+  }
+  CHECK(checked > 20);
+}
+
 TEST_CASE("delta chains: a glass slab's connection obeys Snell's law and its Jacobian matches central differences") {
   auto scene = load(R"("glass": {"type": "cube", "to_world": [{"scale": [1.5, 1.5, 0.1]}, {"translate": [0, 0, 1.2]}],
                        "bsdf": {"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0}})");
