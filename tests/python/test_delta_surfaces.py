@@ -146,3 +146,18 @@ def test_shadow_seen_in_a_plane_mirror():
     d = scene_json(VALIDATION, "shadow_in_mirror")
     summary = check_term(d, "box.vertex_positions", y_translation(d, "box.vertex_positions"), "boundary", 256, 10)
     assert any("through 1 chains of planar mirror reflections" in line and line.startswith("indirect") for line in summary), summary
+
+
+@pytest.mark.parametrize("scene_name,name", [("sphere_in_mirror", "ball.center"), ("shadow_through_glass", "box.vertex_positions"),
+                                             ("shadow_in_mirror", "box.vertex_positions")])
+def test_backward_matches_forward_through_delta_surfaces(scene_name, name):
+    scene = load_in(VALIDATION, scene_json(VALIDATION, scene_name))
+    scene.set_differentiable([name])
+    rng = np.random.default_rng(5)
+    t = rng.normal(size=scene.params[name].shape).astype(np.float32)
+    adjoint = rng.normal(size=(16, 16, 3)).astype(np.float32)
+    fwd = quiet(scene.render_forward, {name: t}, spp=4, spp_primary=16, spp_boundary=16, seed=3)
+    grads = quiet(scene.render_backward, adjoint, spp=4, spp_primary=16, spp_boundary=16, seed=3)
+    lhs = float((adjoint.astype(np.float64) * fwd).sum())
+    rhs = float((grads[name].astype(np.float64) * t).sum())
+    assert abs(lhs - rhs) <= 1e-3 * abs(rhs), (lhs, rhs)
