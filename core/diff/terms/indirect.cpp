@@ -164,7 +164,7 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
     glm::dvec2 film;  // where it lands on the film (spread over pixels by the filter)
     Spectrum value;
     int depth;  // segments from the camera to the observing vertex that sees the edge region
-    int stack;  // -1 direct, else the refraction stack it crosses
+    int stack;  // -1 direct; seen directly through a stack or mirror chain: its slot in stack_dirs; -2 otherwise
   };
   thread_local std::vector<Vec3> stack_dirs;  // per stack, then per mirror chain: the last segment's direction at y (towards y)
   stack_dirs.assign(m_stacks.size() + m_mirror_chains.size(), Vec3(0.0f));
