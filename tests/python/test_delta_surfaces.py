@@ -148,6 +148,14 @@ def test_shadow_seen_in_a_plane_mirror():
     assert any("through 1 chains of planar mirror reflections" in line and line.startswith("indirect") for line in summary), summary
 
 
+@pytest.mark.term("boundary")
+@pytest.mark.parametrize("scene_name", ["shadow_through_glass", "shadow_in_mirror"], ids=["through glass", "in a mirror"])
+def test_moving_receiver_seen_through_delta_surfaces(scene_name):
+    """The floor moves (mostly up) under the static box: the observing point, seen through the
+    slab or in the mirror, slides along the last segment of the path to the camera."""
+    check_term(scene_json(VALIDATION, scene_name), "floor.to_world.translation", np.float32([0.3, 0.4, 1.0]), "boundary", 256, 10)
+
+
 @pytest.mark.parametrize("scene_name,name", [("sphere_in_mirror", "ball.center"), ("shadow_through_glass", "box.vertex_positions"),
                                              ("shadow_in_mirror", "box.vertex_positions")])
 def test_backward_matches_forward_through_delta_surfaces(scene_name, name):
