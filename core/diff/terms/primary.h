@@ -18,9 +18,8 @@
 // virtual eye and projected with it; the two radiances are path traced from the real camera at
 // the two film positions, so the mirror's reflectance, its extent and whatever blocks the path
 // come out of the path tracer (a film position where the camera does not see the mirror has the
-// same radiance on both sides). The planes are found by tracing a grid of camera rays through
-// delta reflections: a facet hit by fewer than kMinPlaneHits rays, or with shading normals
-// (curved or smooth-shaded mirrors), has no virtual camera, and the summary says so.
+// same radiance on both sides). The chains come from core/diff/terms/delta_chains.h; curved or
+// smooth-shaded mirrors have none, and the summary says so.
 #pragma once
 #include "core/diff/shapes/interface.h"
 #include "core/math/distribution.h"
