@@ -89,7 +89,10 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
   else
     s.push_back("primary visibility: " + std::to_string(opt.spp_primary) + " samples per pixel over " +
                 std::to_string(primary->curve_count()) + " silhouette curves" +
-                (primary->skipped_edges() ? " (" + std::to_string(primary->skipped_edges()) + " edges crossing the near plane skipped)" : ""));
+                (primary->skipped_edges() ? " (" + std::to_string(primary->skipped_edges()) + " edges crossing the near plane skipped)" : "") +
+                (primary->mirror_views() ? ", seen directly and through " + std::to_string(primary->mirror_views()) + " chains of planar mirror reflections" : ""));
+  if (opt.spp_primary > 0 && primary)
+    for (const std::string& note : primary->notes()) s.push_back("primary visibility: " + note);
   if (opt.spp_boundary == 0)
     s.push_back("indirect boundary: switched off (spp_boundary = 0): derivatives of shadows and of silhouettes seen "
                 "in reflections are missing");
@@ -112,6 +115,12 @@ std::vector<std::string> summarize(const Scene& scene, const DiffParams& params,
                                                   : "guiding none (uniform)")));
     for (const std::string& id : indirect->space().left_out())
       s.push_back("indirect boundary: static shape '" + id + "' left out: its kind has no boundary segments");
+    if (indirect->refraction_stacks())
+      s.push_back("indirect boundary: camera connections also through " + std::to_string(indirect->refraction_stacks()) +
+                  " stacks of parallel flat glass interfaces");
+    if (indirect->mirror_chains())
+      s.push_back("indirect boundary: camera connections also through " + std::to_string(indirect->mirror_chains()) +
+                  " chains of planar mirror reflections");
   }
   return s;
 }

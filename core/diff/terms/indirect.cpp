@@ -41,12 +41,67 @@ bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const Sur
   return true;
 }
 
+// The same through a refraction stack (core/diff/terms/delta_chains.h): f * T * d(film)/dA at si,
+// with d(film)/dA = d(film)/d(omega at the eye) d(omega)/dA; d_last is the path's direction at si.
+bool connect_through_stack(const Scene& scene, const RefractionStack& st, const FilmProjection& proj, const SurfaceInteraction& si,
+                           const Vec3& w_light, glm::dvec2& film, Spectrum& value, Vec3& d_last, uint64_t& rays) {
+  const Vec3 wl = si.frame.to_local(w_light);
+  if (glm::dot(w_light, si.ng) * wl.z <= 0.0f || wl.z == 0.0f) return false;
+  Vec3 d_eye;
+  double domega_dA;
+  Spectrum T;
+  if (!connect_through_stack(scene, st, si, d_eye, d_last, domega_dA, T, rays)) return false;
+  // Film area per solid angle at the eye: the area Jacobian of a point facing the eye at distance
+  // r, times r^2 (r beyond the near plane).
+  const double r = std::max(1.0, 2.0 * proj.near);
+  const Vec3 eye = scene.camera.world_from_camera.point(Vec3(0.0f));
+  double area_to_film;
+  if (!proj.film_position(eye + float(r) * d_eye, 1.0, film, area_to_film) || !scene.camera.film_covers(film.x, film.y)) return false;
+  const Vec3 wc = -d_last;
+  const Bsdf& bsdf = scene.bsdfs[scene.shapes[si.shape].bsdf];
+  const Spectrum f = bsdf.eval(si.frame.to_local(wc), wl, si.uv, glm::dot(wc, si.ng) > 0.0f) / std::abs(wl.z);
+  value = f * T * float(area_to_film * r * r * domega_dA);
+  return !is_black(value) && is_finite(value);
+}
+
+// The same through a flat mirror chain: the connection to its virtual camera (film position and
+// Jacobian as for a camera there), times the chain's reflectance; d_last as above.
+bool connect_through_mirrors(const Scene& scene, const MirrorChain& chain, const FilmProjection& proj, const Vec3& eye_virtual,
+                             const SurfaceInteraction& si, const Vec3& w_light, glm::dvec2& film, Spectrum& value, Vec3& d_last,
+                             uint64_t& rays) {
+  Vec3 wc = eye_virtual - si.p;
+  const float dist = glm::length(wc);
+  if (!(dist > 0.0f)) return false;
+  wc /= dist;
+  double area_to_film;
+  if (!proj.film_position(si.p, glm::dot(si.ng, wc), film, area_to_film) || !scene.camera.film_covers(film.x, film.y)) return false;
+  const Vec3 wi = si.frame.to_local(wc), wo = si.frame.to_local(w_light);
+  if (glm::dot(w_light, si.ng) * wo.z <= 0.0f || wo.z == 0.0f) return false;
+  const Bsdf& bsdf = scene.bsdfs[scene.shapes[si.shape].bsdf];
+  const Spectrum f = bsdf.eval(wi, wo, si.uv, glm::dot(wc, si.ng) > 0.0f) / std::abs(wo.z);
+  if (is_black(f)) return false;
+  Spectrum R;
+  if (!connect_through_mirrors(scene, chain, eye_virtual, si, R, rays)) return false;
+  value = f * R * float(area_to_film);
+  d_last = -wc;
+  return is_finite(value);
+}
+
 }  // namespace
 
 IndirectBoundary::IndirectBoundary(const Scene& scene, const DiffParams& params, int max_depth, bool perimeter, bool interior)
     : m_scene(scene), m_params(params), m_space(scene, params, perimeter, interior), m_max_depth(max_depth) {
   for (size_t i = 0; i < scene.emitters.size(); ++i)
     if (scene.emitters[i].is_delta()) m_delta_lights.push_back(int(i));
+  if (!m_space.empty()) {
+    DeltaChains chains = find_delta_chains(scene, params);
+    m_stacks = std::move(chains.stacks);
+    m_mirror_chains = std::move(chains.mirror_chains);
+    for (const Camera& c : chains.mirror_cameras) {
+      m_mirror_proj.emplace_back(c);
+      m_mirror_eye.push_back(c.world_from_camera.point(Vec3(0.0f)));
+    }
+  }
 }
 
 float IndirectBoundary::guide_value(const Vec3& u) const {
@@ -109,7 +164,10 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
     glm::dvec2 film;  // where it lands on the film (spread over pixels by the filter)
     Spectrum value;
     int depth;  // segments from the camera to the observing vertex that sees the edge region
+    int stack;  // -1 direct; seen directly through a stack or mirror chain: its slot in stack_dirs; -2 otherwise
   };
+  thread_local std::vector<Vec3> stack_dirs;  // per stack, then per mirror chain: the last segment's direction at y (towards y)
+  stack_dirs.assign(m_stacks.size() + m_mirror_chains.size(), Vec3(0.0f));
   thread_local std::vector<Connection> conns;  // scratch: no allocation per sample
   conns.clear();
   {
@@ -123,7 +181,22 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
       glm::dvec2 film;
       Spectrum v;
       if (connect_to_camera(m_scene, FilmProjection(m_scene.camera), cur, w_light, film, v, rays))
-        conns.push_back({film, throughput * v, j});
+        conns.push_back({film, throughput * v, j, -1});
+      for (size_t q = 0; q < m_stacks.size(); ++q) {
+        Vec3 d_last;
+        if (connect_through_stack(m_scene, m_stacks[q], FilmProjection(m_scene.camera), cur, w_light, film, v, d_last, rays)) {
+          conns.push_back({film, throughput * v, j + int(m_stacks[q].offsets.size()), j == 1 ? int(q) : -2});
+          if (j == 1) stack_dirs[q] = d_last;
+        }
+      }
+      for (size_t q = 0; q < m_mirror_chains.size(); ++q) {
+        Vec3 d_last;
+        if (connect_through_mirrors(m_scene, m_mirror_chains[q], m_mirror_proj[q], m_mirror_eye[q], cur, w_light, film, v, d_last, rays)) {
+          const size_t slot = m_stacks.size() + q;
+          conns.push_back({film, throughput * v, j + int(m_mirror_chains[q].shapes.size()), j == 1 ? int(slot) : -2});
+          if (j == 1) stack_dirs[slot] = d_last;
+        }
+      }
       if (j > bounces) break;
       // Continue the importance path by BSDF sampling (adjoint of reflection; reciprocal BSDFs).
       const Bsdf& bsdf = m_scene.bsdfs[m_scene.shapes[cur.shape].bsdf];
@@ -224,7 +297,15 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
     velocities.push_back(v_ends - Var((1.0f - s) * glm::dot(d, n_b) / dn) * dot(y_att, VV(Var(y.ng.x), Var(y.ng.y), Var(y.ng.z))));
   }
   for (const Connection& c : conns) {
-    const int vi = c.depth == 1 ? vi_slide : vi_attached;
+    int vi = c.depth == 1 ? vi_slide : vi_attached;
+    if (c.stack >= 0 && m_params.moves(y.shape)) {
+      // y seen through a stack slides along the stack's last segment (static interfaces).
+      const Vec3& d = stack_dirs[size_t(c.stack)];
+      const VV y_att = attached_position(DiffContext{m_scene, m_params, in}, SurfacePoint::of(y));
+      vi = int(velocities.size());
+      velocities.push_back(v_ends - Var((1.0f - s) * glm::dot(d, n_b) / glm::dot(d, y.ng)) *
+                                        dot(y_att, VV(Var(y.ng.x), Var(y.ng.y), Var(y.ng.z))));
+    }
     if (velocities[size_t(vi)].is_constant()) continue;  // nothing at either end of the segment moves
     const int budget = max_depth < 0 ? -1 : max_depth - c.depth;
     if (max_depth >= 0 && budget < 1) continue;

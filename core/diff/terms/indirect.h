@@ -18,9 +18,13 @@
 // is evaluated as a term of its own (shadow edges and sphere shadow outlines of delta lights).
 //
 // Creases of flat-shaded meshes need no term here: in the material form they stay where they are.
-// Not covered: camera connections through delta BSDFs (docs/derivatives.md).
+// Camera connections through delta vertices (core/diff/terms/delta_chains.h): through chains of
+// flat mirrors (to the virtual camera) and stacks of parallel flat dielectric interfaces (glass
+// slabs); not through curved ones (docs/derivatives.md).
 #pragma once
+#include "core/diff/ad/film_projection.h"
 #include "core/diff/terms/boundary_space.h"
+#include "core/diff/terms/delta_chains.h"
 #include "core/math/rng.h"
 
 namespace limn {
@@ -31,6 +35,8 @@ class IndirectBoundary {
 
   bool empty() const { return m_space.empty(); }
   const BoundarySpace& space() const { return m_space; }
+  size_t refraction_stacks() const { return m_stacks.size(); }  // camera connections through flat glass
+  size_t mirror_chains() const { return m_mirror_chains.size(); }  // camera connections through flat mirrors
 
   // One boundary sample at the point u of the boundary sample space [0,1)^3, chosen with density
   // pdf_u (pdf_u0: density of u.x alone, used by the delta-light terms that ignore u.y, u.z). Every
@@ -58,6 +64,10 @@ class IndirectBoundary {
   const DiffParams& m_params;
   BoundarySpace m_space;
   std::vector<int> m_delta_lights;
+  std::vector<RefractionStack> m_stacks;
+  std::vector<MirrorChain> m_mirror_chains;
+  std::vector<FilmProjection> m_mirror_proj;  // the chains' virtual cameras
+  std::vector<Vec3> m_mirror_eye;
   int m_max_depth;
 };
 

@@ -3,6 +3,7 @@
 #include "core/diff/ad/film_projection.h"
 #include "core/diff/ad/local_derivatives.h"
 #include "core/diff/shapes/all.h"
+#include "core/diff/terms/delta_chains.h"
 #include "core/render/integrators/path.h"
 
 namespace limn {
@@ -20,10 +21,16 @@ constexpr double kProbeOffset = 1e-3;
 
 PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, int max_depth)
     : m_scene(scene), m_params(params), m_max_depth(max_depth) {
-  const CameraView view(scene.camera);
-  for (int si : params.moving_shapes())
-    with_group<CameraSilhouettes>(scene, si, "camera silhouettes",
-                                  [&](auto group, const auto& g) { group.append(scene, g, si, view, m_curves, m_skipped); });
+  m_views.emplace_back(scene.camera);
+  DeltaChains chains = find_delta_chains(scene, params);
+  for (const Camera& c : chains.mirror_cameras) m_views.emplace_back(c);
+  m_notes = std::move(chains.notes);
+  for (size_t v = 0; v < m_views.size(); ++v)
+    for (int si : params.moving_shapes()) {
+      with_group<CameraSilhouettes>(scene, si, "camera silhouettes",
+                                    [&](auto group, const auto& g) { group.append(scene, g, si, m_views[v], m_curves, m_skipped); });
+      m_view_of.resize(m_curves.size(), int(v));
+    }
   std::vector<float> weights;
   for (const SilhouetteCurve& c : m_curves) weights.push_back(c.weight);
   if (!weights.empty()) m_select = Distribution1D(weights);
@@ -31,13 +38,14 @@ PrimaryBoundary::PrimaryBoundary(const Scene& scene, const DiffParams& params, i
 
 bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, glm::dvec2& film_position, Spectrum& delta_L, Var& normal_velocity,
                              uint64_t& rays) const {
-  const CameraView view(m_scene.camera);
-  const FilmProjection& proj = view.proj;
-  const ad::V3<double>& eye = view.eye;
   const size_t k = m_select.sample_discrete(rng.next_float());
   const double pmf = m_select.pmf(k);
   const float u = rng.next_float();
   const SilhouetteCurve& c = m_curves[k];
+  const bool mirrored = m_view_of[k] > 0;  // seen through planar delta reflections
+  const CameraView& view = m_views[size_t(m_view_of[k])];
+  const FilmProjection& proj = view.proj;
+  const ad::V3<double>& eye = view.eye;
 
   VV P;                    // the curve point as a function of the parameters
   ad::V3<double> dP;       // d(point)/d(curve parameter)
@@ -67,8 +75,11 @@ bool PrimaryBoundary::sample(Pcg32& rng, PathInputs& in, glm::dvec2& film_positi
   PathCounters counters;
   const Vec3 p_value(float(P.x.v), float(P.y.v), float(P.z.v));
   CurveSides sides;
-  with_group<CameraSilhouettes>(m_scene, c.shape, "camera silhouettes",
-                                [&](auto group, const auto& g) { group.sides(m_scene, g, c, p_value, eye, sides); });
+  // Seen through mirrors both sides are probed: shading on a side's surface would need the
+  // reflection chain in front of it (a mesh's outline can be double counted there, see above).
+  if (!mirrored)
+    with_group<CameraSilhouettes>(m_scene, c.shape, "camera silhouettes",
+                                  [&](auto group, const auto& g) { group.sides(m_scene, g, c, p_value, eye, sides); });
   const Ray centre = m_scene.camera.generate_ray(Vec2(float(fx.v), float(fy.v)));
   const SurfaceInteraction* side_surface[2] = {nullptr, nullptr};
   int chosen[2] = {-1, -1};
