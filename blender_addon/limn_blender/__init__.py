@@ -1,5 +1,7 @@
 """limn for Blender: render the scene with the limn differentiable renderer and optimise a mesh
-(its vertices, or its heights as a limn heightfield) so that its renders match target images.
+(its vertices, or its heights as a limn heightfield) or a curve object (the control points and
+radii of a round-bevelled Curve or of hair Curves, as limn fibre curves) so that its renders match
+target images.
 
 Registers as a legacy add-on in Blender 3.x (bl_info) and as an extension in 4.2+
 (blender_manifest.toml). Scripts can call ``render(...)`` and ``export_scene(...)`` directly."""
@@ -42,7 +44,7 @@ class LimnSettings(bpy.types.PropertyGroup):
                                      description="Longest path in segments; 0 uses Cycles' max bounces + 2")
     image_name: bpy.props.StringProperty(name="Image", default="limn render")
     # Optimisation
-    optimize_object: bpy.props.PointerProperty(name="Object", type=bpy.types.Object, poll=lambda self, o: o.type == "MESH")
+    optimize_object: bpy.props.PointerProperty(name="Object", type=bpy.types.Object, poll=lambda self, o: o.type in ("MESH", "CURVE", "CURVES"))
     targets: bpy.props.CollectionProperty(type=optimize_ops.LimnTarget)
     iterations: bpy.props.IntProperty(name="Iterations", default=50, min=1)
     learning_rate: bpy.props.FloatProperty(name="Learning rate", default=0.01, min=1e-6, precision=4)
@@ -50,10 +52,12 @@ class LimnSettings(bpy.types.PropertyGroup):
     optimize_mode: bpy.props.EnumProperty(
         name="Optimise", default="AUTO",
         items=[("AUTO", "Detect", "Heights for objects marked as limn heightfields and meshes with an image Displace "
-                                  "modifier; vertices otherwise"),
+                                  "modifier; control points for curve and hair curves objects; vertices otherwise"),
                ("MESH", "Mesh vertices", "Move the mesh's vertices"),
                ("HEIGHTFIELD", "Heightfield", "Optimise heights: the image of a plane's Displace modifier, or the z of "
-                                              "a regular grid mesh")])
+                                              "a regular grid mesh"),
+               ("CURVE", "Curve control points", "Control points and radii of a curve (round bevel) or hair curves "
+                                                 "object, as limn fibre curves")])
     mask_vertex_group: bpy.props.StringProperty(
         name="Mask group", description="Heightfield of a grid mesh: heights of vertices with zero weight (or outside "
                                        "the group) stay fixed")
@@ -87,9 +91,9 @@ class LIMN_PT_render(bpy.types.Panel):
         box.prop(s, "optimize_object")
         box.prop(s, "optimize_mode")
         obj = s.optimize_object
-        if obj is not None:
+        if obj is not None and obj.type == "MESH":
             box.prop(obj, "limn_heightfield")
-        if s.optimize_mode != "MESH":
+        if s.optimize_mode not in ("MESH", "CURVE") and (obj is None or obj.type == "MESH"):
             if obj is not None:
                 box.prop_search(s, "mask_vertex_group", obj, "vertex_groups")
             box.prop(s, "mask_image")
