@@ -185,6 +185,9 @@ class Source:
             for i, sp in enumerate(splines):
                 controls.append(self._legacy_spline(i, sp))
             self.materials = sorted({sp.material_index for sp in splines})
+            if data_obj.data.use_fill_caps:
+                self.warnings.append(f"curve object '{obj.name}': Fill Caps are not drawn (limn's tubes are open at "
+                                     "both ends)")
         elif obj.type == "CURVES":
             self.kind = "hair"
             self.scale = 1.0

@@ -162,9 +162,9 @@ class Problem:
         self.obj = obj
         self.vertex_count = len(obj.data.vertices) if obj.type == "MESH" else 0
         self.project = None
-        self.curves = curves.Source(obj) if self.mode == "CURVE" else None  # refuses what it cannot write back
-        if self.curves is not None:
+        if self.mode == "CURVE":
             self._check_curve_object(obj)
+        self.curves = curves.Source(obj) if self.mode == "CURVE" else None  # refuses what it cannot write back
         self.warnings = [f"target image '{image.name}' is a generated image that is not packed: it is lost when "
                          "the file is saved (Image > Pack keeps it)" for _, image, _ in targets if _unsaved(image)]
         # Heights and mask first: a non-grid mesh, a bad Displace set-up or mask fails before any export.

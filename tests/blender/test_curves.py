@@ -65,7 +65,7 @@ def _curve(name, kind="NURBS", points=POINTS, radii=RADII, bevel=BEVEL, order=4,
 
 def _hair(name, kind="POLY", points=POINTS, radii=RADII):
     """A hair Curves object made from a legacy curve (Blender 3.4 cannot add hair curves from Python)."""
-    legacy = _curve(name, kind, points, radii, material=False)
+    legacy = _curve(name, kind, points, radii, bevel=0.0, material=False)  # a bevelled curve does not convert
     bpy.ops.object.select_all(action="DESELECT")
     legacy.select_set(True)
     bpy.context.view_layer.objects.active = legacy
