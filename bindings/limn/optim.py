@@ -187,7 +187,7 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
             opt.step(precond.gradient_u(grad) if precond else grad)
         except ValueError as e:
             return stop(str(e))
-        x_new = precond.from_u(u) if precond else u
+        x_new = precond.from_u(u) if precond else u.copy()  # not u itself: Adam steps u in place, x must stay the last good state
         if keep is not None:
             x_new = np.where(keep > 0, x_new, x)
         if project is not None and np.isfinite(x_new).all():
