@@ -113,7 +113,7 @@ MAX_STEP = 0.5
 
 def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: float = 20.0, loss=l2, spp: int = 8,
         spp_primary: int | None = None, spp_boundary: int | None = None, mask=None, faces=None, callback=None,
-        seed: int = 0, options: dict | None = None, project=None) -> FitResult:
+        seed: int = 0, options: dict | None = None, project=None, gradient=None) -> FitResult:
     """Optimise the vertex positions ``name`` (shared by every scene in ``views``, a list of
     (scene, target image) pairs) to match the targets. ``faces`` (F x 3) enables Large Steps with
     ``lambda_`` (0 disables it); ``mask`` (N,) of 0/1 holds vertices with 0 fixed.
@@ -128,7 +128,9 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
     Fibre curves' ``"<id>.control_points"`` (N x 4: x, y, z, radius) are optimised as N rows
     (``mask`` (N,) holds whole control points). ``project(x)`` (the parameter's shape in and out)
     is applied after every step, before the scenes see it: a projection onto what the parameter
-    may be (e.g. radii clamped above a floor); the optimiser continues from the projected point."""
+    may be (e.g. radii clamped above a floor); the optimiser continues from the projected point.
+    ``gradient(g)`` (same shape) maps each iteration's gradient before the step: with a ``project``
+    that derives some entries from others, the chain rule onto the free entries (theirs zeroed)."""
     if not views:
         raise ValueError("fit: no views")
     scenes = [s for s, _ in views]
@@ -173,6 +175,8 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
                     raise
                 return stop(str(e))
             grad += g[name].reshape(x.shape)
+        if gradient is not None:
+            grad = np.asarray(gradient(grad.reshape(shape).copy()), dtype=np.float64).reshape(x.shape)
         if keep is not None:
             grad *= keep
         if not math.isfinite(total) or not np.isfinite(grad).all():

@@ -25,7 +25,9 @@ How each kind of spline becomes B-spline control points, and what is approximate
 Write-back inverts these maps: every spline keeps its point count (Blender 3.4 cannot resize hair
 curves from Python), so a run never needs a resize. The extra end points of the natural spline
 and the repeated points of a cyclic NURBS are not free: `project` re-derives them after every
-optimiser step, so what is written back exports again to the same control points."""
+optimiser step, and their share of the gradient goes to the points they are made of (`gradient`,
+the chain rule), so the optimiser moves the free points and what is written back exports again to
+the same control points."""
 from __future__ import annotations
 
 import numpy as np
@@ -143,6 +145,25 @@ def _project_piece(piece: _Piece, cp: np.ndarray) -> None:
         cp[0, :3] = 2.0 * cp[1, :3] - cp[2, :3]
         cp[-1, :3] = 2.0 * cp[-2, :3] - cp[-3, :3]
     cp[0, 3], cp[-1, 3] = cp[1, 3], cp[-2, 3]
+
+
+def _chain_piece(piece: _Piece, g: np.ndarray) -> None:
+    """The chain rule of _project_piece, in place: the gradient of each derived control point goes to
+    the free ones it is made of (P0 = 2 P1 - P2: g1 += 2 g0, g2 -= g0), and is then zero."""
+    n = piece.n
+    if piece.kind == "nurbs":
+        if piece.wrap:
+            g[:3] += g[n:]
+            g[n:] = 0.0
+        return
+    if piece.kind == "natural":
+        for d, a, b in ((0, 1, 2), (-1, -2, -3)):
+            g[a, :3] += 2.0 * g[d, :3]
+            g[b, :3] -= g[d, :3]
+            g[d, :3] = 0.0
+    g[1, 3] += g[0, 3]
+    g[-2, 3] += g[-1, 3]
+    g[0, 3] = g[-1, 3] = 0.0
 
 
 def _attribute(data, name: str, domain_size: int, default, width: int = 1) -> np.ndarray:
@@ -373,6 +394,12 @@ class Source:
         for piece, start in zip(self.pieces, self.offsets):
             _project_piece(piece, x[start:start + piece.count])
         return x
+
+    def gradient(self, g: np.ndarray) -> np.ndarray:
+        """The loss gradient (K, 4) onto the free control points (see project)."""
+        for piece, start in zip(self.pieces, self.offsets):
+            _chain_piece(piece, g[start:start + piece.count])
+        return g
 
     def write_back(self, x: np.ndarray, world) -> None:
         """Stores world control points x (K, 4) in the object's data (same point counts)."""

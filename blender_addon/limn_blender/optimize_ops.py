@@ -161,10 +161,12 @@ class Problem:
         self.limn = _limn()
         self.obj = obj
         self.vertex_count = len(obj.data.vertices) if obj.type == "MESH" else 0
-        self.project = None
+        self.project = self.gradient = None
         if self.mode == "CURVE":
             self._check_curve_object(obj)
         self.curves = curves.Source(obj) if self.mode == "CURVE" else None  # refuses what it cannot write back
+        if self.curves is not None:  # refuses a transform the tubes cannot follow (non-uniform scale)
+            self.curves.world_control(np.array([list(row) for row in obj.matrix_world]))
         self.warnings = [f"target image '{image.name}' is a generated image that is not packed: it is lost when "
                          "the file is saved (Image > Pack keeps it)" for _, image, _ in targets if _unsaved(image)]
         # Heights and mask first: a non-grid mesh, a bad Displace set-up or mask fails before any export.
@@ -204,6 +206,7 @@ class Problem:
             self.faces = None
             self.counts = self.curves.counts()
             self.project = lambda x: self.curves.project(x, self.world)
+            self.gradient = self.curves.gradient
             self.warnings += self.curves.warnings
             self._refs = self._make_refs()
             return
@@ -324,7 +327,7 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
     t0 = time.perf_counter()
     result = problem.limn.optim.fit(problem.views, problem.name, iterations=iterations, lr=lr, lambda_=lambda_, spp=spp,
                                     faces=problem.faces, mask=problem.mask, callback=callback,
-                                    project=problem.project)
+                                    project=problem.project, gradient=problem.gradient)
     problem.write_back(problem.views[0][0].params[problem.name])
     return {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled,
             "mode": problem.mode}
@@ -386,7 +389,8 @@ class OptimizeJob(jobs.Job):
         views = [(_Cancellable(scene, self.keep_going), target) for scene, target in problem.views]
         try:
             problem.limn.optim.fit(views, problem.name, iterations=self.iterations, spp=spp, lr=lr, lambda_=lambda_,
-                                   faces=problem.faces, mask=problem.mask, callback=callback, project=problem.project)
+                                   faces=problem.faces, mask=problem.mask, callback=callback, project=problem.project,
+                                   gradient=problem.gradient)
         except problem.limn.RenderCancelled:
             if not self.cancelled:
                 raise
