@@ -239,6 +239,32 @@ def test_curves_that_are_not_tubes_or_cannot_be_written_back_are_refused(addon):
 
 
 # ---- optimisation ------------------------------------------------------------------------------------
+def test_gradient_is_the_chain_rule_of_the_projection(addon):
+    """For every piece kind, Source.gradient(g) is the gradient of g . project(x) with respect to x
+    (finite differences; project is linear in the entries it keeps, so they are exact up to rounding):
+    derived entries get 0, the free ones the share of the derived ones they are made of."""
+    c = addon.curves
+    rng = np.random.default_rng(3)
+    for piece in (c._Piece("natural", 5), c._Piece("nurbs", 6, wrap=True), c._Piece("nurbs", 5), c._Piece("bezier", 4)):
+        x = rng.normal(size=(piece.count, 4))
+        g = rng.normal(size=(piece.count, 4))
+        loss = lambda x: float((g * _projected(c, piece, x)).sum())
+        numeric = np.zeros_like(x)
+        for idx in np.ndindex(*x.shape):
+            e = np.zeros_like(x)
+            e[idx] = 1e-3
+            numeric[idx] = (loss(x + e) - loss(x - e)) / 2e-3
+        chained = g.copy()
+        c._chain_piece(piece, chained)
+        np.testing.assert_allclose(chained, numeric, atol=1e-9, err_msg=piece.kind)
+
+
+def _projected(c, piece, x):
+    y = x.copy()
+    c._project_piece(piece, y)
+    return y
+
+
 TRUTH_SHIFT = np.array([0.0, 0.0, 0.25])   # the target's curve is this much higher ...
 TRUTH_RADIUS = 1.4                         # ... and this much thicker
 
