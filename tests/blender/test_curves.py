@@ -259,6 +259,31 @@ def test_gradient_is_the_chain_rule_of_the_projection(addon):
         np.testing.assert_allclose(chained, numeric, atol=1e-9, err_msg=piece.kind)
 
 
+@pytest.mark.parametrize("kind", ["NURBS", "CYCLIC", "POLY", "BEZIER", "HAIR"])
+def test_write_back_exports_again_to_the_same_control_points(addon, kind):
+    """Any projected control points written into the object (same type, same point counts) read back
+    as the same control points: NURBS and cyclic NURBS points, poly points (knot values), Bezier knots
+    and handles (set to Free), hair positions and radii; under a rotation, translation and scale."""
+    if kind == "HAIR":
+        obj = _hair("obj", "POLY", HAIR_POINTS)
+    else:
+        obj = _curve("obj", "NURBS" if kind == "CYCLIC" else kind, cyclic=kind == "CYCLIC")
+    obj.location, obj.rotation_euler, obj.scale = (0.2, 0.1, -0.3), (0.1, 0.3, -0.2), (1.3, 1.3, 1.3)
+    bpy.context.view_layer.update()
+    world = np.array([list(r) for r in obj.matrix_world])
+    src = addon.curves.Source(obj)
+    counts = src.counts()
+    x = src.world_control(world).astype(np.float64)
+    x += np.random.default_rng(1).normal(scale=0.03, size=x.shape)
+    x = src.project(x, world)
+    src.write_back(x, world)
+    again = addon.curves.Source(obj)
+    assert again.counts() == counts and obj.type == ("CURVES" if kind == "HAIR" else "CURVE")
+    np.testing.assert_allclose(again.world_control(world), x, atol=2e-5)
+    if kind == "BEZIER":
+        assert all(p.handle_left_type == p.handle_right_type == "FREE" for p in obj.data.splines[0].bezier_points)
+
+
 def _projected(c, piece, x):
     y = x.copy()
     c._project_piece(piece, y)
@@ -311,13 +336,14 @@ def _errors(cp, truth):
     return float(np.linalg.norm(a[:, :3] - b[:, :3], axis=1).mean()), float(np.abs(a[:, 3] - b[:, 3]).mean())
 
 
-def _check_moves_towards(addon, name, obj, start, truth, losses):
+def _check_moves_towards(addon, name, obj, start, truth, out):
     """The loss falls, and the tube (centre line and radius, from the object's points as the exporter
     reads them) moves towards the truth's."""
+    losses = out["losses"]
     p0, r0 = _errors(start, truth)
     p1, r1 = _errors(addon.curves.Source(obj).control, truth)
     print(f"{name}: loss {losses[0]:.5f} -> {min(losses[-3:]):.5f}, centre-line error {p0:.3f} -> {p1:.3f}, "
-          f"radius error {r0:.4f} -> {r1:.4f} (along the tube, mean)")
+          f"radius error {r0:.4f} -> {r1:.4f} (along the tube, mean), {len(losses)} iterations in {out['seconds']:.1f} s")
     assert min(losses[-3:]) < 0.6 * losses[0], losses
     assert p1 < 0.6 * p0, (p0, p1)
     assert r1 < 0.8 * r0, (r0, r1)
@@ -337,7 +363,7 @@ def test_curve_object_moves_towards_the_target_and_is_written_back(addon, limn):
     out = addon.optimize(obj, targets, iterations=40, spp=8, lr=0.01)
     assert out["mode"] == "CURVE" and not out["cancelled"]
     assert obj.type == "CURVE" and len(obj.data.splines[0].points) == len(POINTS)
-    _check_moves_towards(addon, "NURBS curve object", obj, start_control, truth_control, out["losses"])
+    _check_moves_towards(addon, "NURBS curve object", obj, start_control, truth_control, out)
 
     # The operator: the same loop, one undo step.
     _set_legacy(obj, start)
@@ -390,7 +416,7 @@ def test_hair_object_moves_towards_the_target_and_is_written_back(addon, limn):
     out = addon.optimize(obj, targets, iterations=40, spp=8, lr=0.01)
     after = _hair_points(obj)
     assert obj.type == "CURVES" and len(obj.data.points) == len(POINTS) and len(obj.data.curves) == 1
-    _check_moves_towards(addon, "hair object", obj, start_control, truth_control, out["losses"])
+    _check_moves_towards(addon, "hair object", obj, start_control, truth_control, out)
     # What was written exports again to the control points the optimiser ended with.
     desc, _ = addon.export_scene(spp=4)
     cp = desc["hair"]["control_points"].astype(np.float64)
