@@ -53,28 +53,7 @@ def limn(addon):
 
 def _curve(name, kind="NURBS", points=POINTS, radii=RADII, bevel=BEVEL, order=4, cyclic=False, material=True):
     """A legacy Curve object with one spline of `kind` through / on `points`."""
-    cu = bpy.data.curves.new(name, "CURVE")
-    cu.dimensions = "3D"
-    cu.bevel_depth = bevel
-    sp = cu.splines.new(kind)
-    if kind == "BEZIER":
-        sp.bezier_points.add(len(points) - 1)
-        for p, co, r in zip(sp.bezier_points, points, radii):
-            p.co, p.radius = co, r
-            p.handle_left_type = p.handle_right_type = "AUTO"
-    else:
-        sp.points.add(len(points) - 1)
-        for p, co, r in zip(sp.points, points, radii):
-            p.co, p.radius = (*co, 1.0), r
-        if kind == "NURBS":
-            sp.order_u = order
-            sp.use_endpoint_u = sp.use_bezier_u = False
-    sp.use_cyclic_u = cyclic
-    obj = bpy.data.objects.new(name, cu)
-    bpy.context.scene.collection.objects.link(obj)
-    if material:
-        cu.materials.append(bpy.data.materials.new(f"{name}_mat"))
-    return obj
+    return scene_builder.add_curve(name, kind, points, radii, bevel, order, cyclic, material)
 
 
 def _hair(name, kind="POLY", points=POINTS, radii=RADII):
