@@ -52,6 +52,8 @@ def fibre_reason(obj) -> str:
         return "it has a bevel or taper object"
     if cu.extrude != 0.0 or cu.offset != 0.0:
         return f"it has extrude {cu.extrude:g} / offset {cu.offset:g}"
+    if getattr(cu, "bevel_factor_start", 0.0) > 0.0 or getattr(cu, "bevel_factor_end", 1.0) < 1.0:
+        return f"its bevel covers only part of it (bevel start {cu.bevel_factor_start:g}, end {cu.bevel_factor_end:g})"
     if cu.dimensions != "3D" or cu.fill_mode != "FULL":
         return f"it is a {cu.dimensions} curve with fill mode {cu.fill_mode} (needs 3D, Full)"
     active = [m.name for m in obj.modifiers if m.show_render]
@@ -206,6 +208,8 @@ class Source:
             for i, sp in enumerate(splines):
                 controls.append(self._legacy_spline(i, sp))
             self.materials = sorted({sp.material_index for sp in splines})
+            # "Radius" off (Curve > Geometry): Blender's bevel ignores the point radii.
+            self.use_radius = bool(getattr(data_obj.data, "use_radius", True))
             if data_obj.data.use_fill_caps:
                 self.warnings.append(f"curve object '{obj.name}': Fill Caps are not drawn (limn's tubes are open at "
                                      "both ends)")
@@ -217,6 +221,8 @@ class Source:
         else:
             raise ValueError(f"object '{obj.name}' is a {obj.type.lower()}, not a curve (Curve or hair Curves) object")
         self.control = np.concatenate(controls)
+        if self.kind == "curve" and not self.use_radius:
+            self.control[:, 3] = 1.0
         self.control[:, 3] *= self.scale
         self.offsets = np.cumsum([0] + [p.count for p in self.pieces[:-1]]).astype(np.int64)
         bad = np.flatnonzero(~(self.control[:, 3] > 0))

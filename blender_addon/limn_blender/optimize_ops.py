@@ -228,6 +228,9 @@ class Problem:
             if why:
                 raise ValueError(f"curve object '{obj.name}' is not rendered as limn fibre curves: {why}; limn "
                                  "optimises curves with a round bevel (bevel depth > 0) and no modifiers")
+            if not getattr(obj.data, "use_radius", True):
+                raise ValueError(f"curve object '{obj.name}': its option Radius (Geometry) is off, so Blender's tube "
+                                 "ignores the point radii the optimisation writes; turn it on")
             return
         evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
         here = curves.Source(obj).control

@@ -212,6 +212,18 @@ def test_curves_that_are_not_tubes_or_cannot_be_written_back_are_refused(addon):
     with pytest.raises(ValueError, match="object 'flat': its transform scales non-uniformly"):
         addon.optimize(obj, [(cam, img)], iterations=1)
     obj.scale = (1.0, 1.0, 1.0)
+    obj.data.bevel_factor_end = 0.5
+    desc, _ = addon.export_scene(spp=4)
+    assert desc["flat"]["type"] == "mesh"  # Blender's partial tube, as a mesh
+    with pytest.raises(ValueError, match=r"'flat' is not rendered as limn fibre curves: its bevel covers only part"):
+        addon.optimize(obj, [(cam, img)], iterations=1)
+    obj.data.bevel_factor_end = 1.0
+    obj.data.use_radius = False
+    desc, _ = addon.export_scene(spp=4)
+    np.testing.assert_allclose(desc["flat"]["control_points"][:, 3], BEVEL, rtol=1e-6)  # point radii ignored
+    with pytest.raises(ValueError, match="curve object 'flat': its option Radius"):
+        addon.optimize(obj, [(cam, img)], iterations=1)
+    obj.data.use_radius = True
     obj.data.splines[0].points[1].radius = 0.0
     with pytest.raises(ValueError, match="object 'flat', spline 0: control point 1 has radius 0"):
         addon.optimize(obj, [(cam, img)], iterations=1)
