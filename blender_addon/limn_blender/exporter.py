@@ -386,6 +386,9 @@ def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | Non
         original = obj.original if hasattr(obj, "original") else obj
         if original.hide_render:
             continue
+        parent = inst.parent if inst.is_instance else None
+        if parent is not None and parent.type == "CURVE" and parent.original == original:
+            continue  # a curve's own evaluated mesh (listed as its instance since Blender 3.0): the curve is exported itself
         world = _matrix(inst.matrix_world)
         if obj.type == "MESH" and (original.name in heightfields or getattr(original, "limn_heightfield", False)):
             _export_heightfield_object(original, obj, world, desc, warnings, used_ids)
