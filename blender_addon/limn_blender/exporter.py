@@ -218,15 +218,17 @@ def _export_heightfield_object(original, obj, world, desc, warnings, used_ids):
 def _export_curve_object(original, obj, world, desc, warnings, used_ids) -> bool:
     """A legacy Curve (round bevel) or hair Curves object as limn fibre curves (curves.py). Returns
     False, with a warning naming the object and what limn cannot represent, when a legacy curve
-    must be exported as Blender's tessellated mesh instead (hair objects have no mesh: refused)."""
+    must be exported as Blender's tessellated mesh instead (a hair object has no mesh: it is skipped
+    with the warning)."""
     if obj.type == "CURVE" and curves.fibre_reason(original):
         return False  # not a round tube: Blender's mesh of it, as for any curve before
     try:
         source = curves.Source(original, obj)
         shape_world = source.shape(world, {})
     except ValueError as e:
-        if obj.type == "CURVES":
-            raise
+        if obj.type == "CURVES":  # no mesh to fall back on
+            warnings.append(f"{e}; skipped")
+            return True
         warnings.append(f"{e}; exported as Blender's tessellated mesh instead")
         return False
     warnings.extend(source.warnings)

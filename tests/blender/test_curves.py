@@ -176,6 +176,15 @@ def test_hair_export_reads_positions_and_radii(addon):
     desc, warnings = addon.export_scene(spp=4)
     np.testing.assert_allclose(desc["hairn"]["control_points"], np.concatenate([POINTS, RADII[:, None]], 1), atol=1e-6)
     assert warnings == []
+    # A hair object without a radius attribute (a new one in 3.4 and 4.5 has only 'position'): skipped
+    # by the export with a warning, refused by the optimisation.
+    nurbs.data.attributes.remove(nurbs.data.attributes["radius"])
+    desc, warnings = addon.export_scene(spp=4)
+    assert "hairn" not in desc
+    assert any("hair object 'hairn' has no 'radius' attribute" in w and w.endswith("skipped") for w in warnings), warnings
+    img = bpy.data.images.new("t", 48, 36, float_buffer=True)
+    with pytest.raises(ValueError, match="hair object 'hairn' has no 'radius' attribute"):
+        addon.optimize(nurbs, [(bpy.data.objects["camera"], img)], iterations=1)
 
 
 @pytest.mark.parametrize("change, message", [
