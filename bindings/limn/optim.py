@@ -113,7 +113,7 @@ MAX_STEP = 0.5
 
 def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: float = 20.0, loss=l2, spp: int = 8,
         spp_primary: int | None = None, spp_boundary: int | None = None, mask=None, faces=None, callback=None,
-        seed: int = 0, options: dict | None = None) -> FitResult:
+        seed: int = 0, options: dict | None = None, project=None, gradient=None) -> FitResult:
     """Optimise the vertex positions ``name`` (shared by every scene in ``views``, a list of
     (scene, target image) pairs) to match the targets. ``faces`` (F x 3) enables Large Steps with
     ``lambda_`` (0 disables it); ``mask`` (N,) of 0/1 holds vertices with 0 fixed.
@@ -124,7 +124,13 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
     finite or moves a point by more than ``MAX_STEP`` of the bounding-box diagonal, or the scene
     refuses the new parameters (e.g. a triangle collapsed).
     A heightfield's ``"<id>.heights"`` (rows x columns) works the same way: ``faces`` from
-    :func:`grid_faces`, ``mask`` of shape (rows * columns,) or (rows, columns)."""
+    :func:`grid_faces`, ``mask`` of shape (rows * columns,) or (rows, columns).
+    Fibre curves' ``"<id>.control_points"`` (N x 4: x, y, z, radius) are optimised as N rows
+    (``mask`` (N,) holds whole control points). ``project(x)`` (the parameter's shape in and out)
+    is applied after every step, before the scenes see it: a projection onto what the parameter
+    may be (e.g. radii clamped above a floor); the optimiser continues from the projected point.
+    ``gradient(g)`` (same shape) maps each iteration's gradient before the step: with a ``project``
+    that derives some entries from others, the chain rule onto the free entries (theirs zeroed)."""
     if not views:
         raise ValueError("fit: no views")
     scenes = [s for s, _ in views]
@@ -133,8 +139,10 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
             raise ValueError(f"fit: target shape {target.shape} != film {(s.height, s.width, 3)}")
         s.set_differentiable([name])
     shape = scenes[0].params[name].shape
-    # Points as rows: vertex positions (N, 3) as they are, heights (rows, columns) as (N, 1).
-    x = scenes[0].params[name].astype(np.float64).reshape(shape if len(shape) == 2 and shape[1] == 3 else (-1, 1))
+    # Points as rows: vertex positions (N, 3) and curve control points (N, 4) as they are, heights
+    # (rows, columns) as (N, 1).
+    rows = shape if len(shape) == 2 and shape[1] in (3, 4) else (-1, 1)
+    x = scenes[0].params[name].astype(np.float64).reshape(rows)
     keep = None if mask is None else np.asarray(mask, dtype=np.float64).reshape(-1, 1)
     precond = LargeSteps(faces, len(x), lambda_) if faces is not None and lambda_ > 0 else None
     u = precond.to_u(x) if precond else x.copy()
@@ -167,6 +175,8 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
                     raise
                 return stop(str(e))
             grad += g[name].reshape(x.shape)
+        if gradient is not None:
+            grad = np.asarray(gradient(grad.reshape(shape).copy()), dtype=np.float64).reshape(x.shape)
         if keep is not None:
             grad *= keep
         if not math.isfinite(total) or not np.isfinite(grad).all():
@@ -181,9 +191,12 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
             opt.step(precond.gradient_u(grad) if precond else grad)
         except ValueError as e:
             return stop(str(e))
-        x_new = precond.from_u(u) if precond else u
+        x_new = precond.from_u(u) if precond else u.copy()  # not u itself: Adam steps u in place, x must stay the last good state
         if keep is not None:
             x_new = np.where(keep > 0, x_new, x)
+        if project is not None and np.isfinite(x_new).all():
+            x_new = np.asarray(project(x_new.reshape(shape).copy()), dtype=np.float64).reshape(x.shape)
+            u[...] = precond.to_u(x_new) if precond else x_new
         moved = float(np.abs(x_new - x).max()) if np.isfinite(x_new).all() else math.inf
         if moved > MAX_STEP * diagonal:
             u[...] = u_before

@@ -1,6 +1,7 @@
 """limn for Blender: render the scene with the limn differentiable renderer and optimise a mesh
-(its vertices, its heights as a limn heightfield, or a signed-distance grid voxelised from it)
-so that its renders match target images.
+(its vertices, its heights as a limn heightfield, or a signed-distance grid voxelised from it) or
+a curve object (the control points and radii of a round-bevelled Curve or of hair Curves, as limn
+fibre curves) so that its renders match target images.
 
 Registers as a legacy add-on in Blender 3.x (bl_info) and as an extension in 4.2+
 (blender_manifest.toml). Scripts can call ``render(...)`` and ``export_scene(...)`` directly."""
@@ -43,7 +44,7 @@ class LimnSettings(bpy.types.PropertyGroup):
                                      description="Longest path in segments; 0 uses Cycles' max bounces + 2")
     image_name: bpy.props.StringProperty(name="Image", default="limn render")
     # Optimisation
-    optimize_object: bpy.props.PointerProperty(name="Object", type=bpy.types.Object, poll=lambda self, o: o.type == "MESH")
+    optimize_object: bpy.props.PointerProperty(name="Object", type=bpy.types.Object, poll=lambda self, o: o.type in ("MESH", "CURVE", "CURVES"))
     targets: bpy.props.CollectionProperty(type=optimize_ops.LimnTarget)
     iterations: bpy.props.IntProperty(name="Iterations", default=50, min=1)
     learning_rate: bpy.props.FloatProperty(name="Learning rate", default=0.01, min=1e-6, precision=4)
@@ -51,12 +52,14 @@ class LimnSettings(bpy.types.PropertyGroup):
     optimize_mode: bpy.props.EnumProperty(
         name="Optimise", default="AUTO",
         items=[("AUTO", "Detect", "Heights for objects marked as limn heightfields and meshes with an image Displace "
-                                  "modifier; vertices otherwise"),
+                                  "modifier; control points for curve and hair curves objects; vertices otherwise"),
                ("MESH", "Mesh vertices", "Move the mesh's vertices"),
                ("HEIGHTFIELD", "Heightfield", "Optimise heights: the image of a plane's Displace modifier, or the z of "
                                               "a regular grid mesh"),
                ("SDF", "Signed distance grid", "Voxelise the closed mesh into a limn SDF, optimise the grid and write "
-                                               "it back as a mesh (marching cubes; replaces the mesh's vertices and faces)")])
+                                               "it back as a mesh (marching cubes; replaces the mesh's vertices and faces)"),
+               ("CURVE", "Curve control points", "Control points and radii of a curve (round bevel) or hair curves "
+                                                 "object, as limn fibre curves")])
     sdf_resolution: bpy.props.IntProperty(
         name="SDF resolution", default=32, min=2, max=1024, soft_max=128,
         description="SDF mode: grid samples along the mesh's longest side (cubic voxels); memory and time grow with its cube")
@@ -97,12 +100,12 @@ class LIMN_PT_render(bpy.types.Panel):
         box.prop(s, "optimize_object")
         box.prop(s, "optimize_mode")
         obj = s.optimize_object
-        if obj is not None:
+        if obj is not None and obj.type == "MESH":
             box.prop(obj, "limn_heightfield")
         if s.optimize_mode == "SDF":
             box.prop(s, "sdf_resolution")
             box.prop(s, "sdf_padding")
-        elif s.optimize_mode != "MESH":
+        elif s.optimize_mode not in ("MESH", "CURVE") and (obj is None or obj.type == "MESH"):
             if obj is not None:
                 box.prop_search(s, "mask_vertex_group", obj, "vertex_groups")
             box.prop(s, "mask_image")

@@ -4,7 +4,8 @@ Exports mesh-like objects with modifiers applied (world-space vertices, split by
 active camera, point / spot / sun / area lights, the world colour, and Principled BSDF (plus a few simple
 BSDF nodes) mapped to the closest limn BSDF. Objects marked as limn heightfields (the object
 property ``limn_heightfield``, or named in ``export_scene(heightfields=...)``) become limn
-``heightfield`` shapes instead (see heightfield.py). Everything that cannot be represented is listed
+``heightfield`` shapes instead (see heightfield.py). Curve objects with a round bevel and hair
+``Curves`` objects become limn ``bsplinecurve`` fibre curves (see curves.py). Everything that cannot be represented is listed
 in the returned warnings; nothing is dropped silently. Works with Blender 3.4 and 4.x.
 """
 from __future__ import annotations
@@ -16,7 +17,7 @@ import os
 import bpy
 import numpy as np
 
-from . import heightfield
+from . import curves, heightfield
 
 # Blender camera space looks along -Z with +Y up; limn's looks along +Z with +X to the left.
 # Rotating by 180 degrees about Y maps one onto the other.
@@ -214,6 +215,38 @@ def _export_heightfield_object(original, obj, world, desc, warnings, used_ids):
     desc[_unique(original.name, used_ids)] = source.shape(world, bsdf)
 
 
+def _export_curve_object(original, obj, world, desc, warnings, used_ids) -> bool:
+    """A legacy Curve (round bevel) or hair Curves object as limn fibre curves (curves.py). Returns
+    False, with a warning naming the object and what limn cannot represent, when a legacy curve
+    must be exported as Blender's tessellated mesh instead (a hair object has no mesh: it is skipped
+    with the warning)."""
+    if obj.type == "CURVE" and curves.fibre_reason(original):
+        return False  # not a round tube: Blender's mesh of it, as for any curve before
+    try:
+        source = curves.Source(original, obj)
+        shape_world = source.shape(world, {})
+    except ValueError as e:
+        if obj.type == "CURVES":  # no mesh to fall back on
+            warnings.append(f"{e}; skipped")
+            return True
+        warnings.append(f"{e}; exported as Blender's tessellated mesh instead")
+        return False
+    warnings.extend(source.warnings)
+    slots = [s.material for s in original.material_slots]
+    used = [slots[i] if i < len(slots) else None for i in source.materials] or [None]
+    if len({id(m) for m in used}) > 1:
+        warnings.append(f"object '{original.name}': limn fibre curves have one material; using "
+                        f"'{used[0].name if used[0] else 'none'}'")
+    mat = used[0] if used else (slots[0] if slots else None)
+    bsdf, emission = convert_material(mat, warnings)
+    if emission is not None:
+        warnings.append(f"object '{original.name}': material '{mat.name}' emits light, and limn's fibre curves "
+                        "cannot be area emitters; exported without emission")
+    shape_world["bsdf"] = bsdf
+    desc[_unique(original.name, used_ids)] = shape_world
+    return True
+
+
 def _unique(name: str, used: set[str]) -> str:
     base, k = name, 1
     while name in used:
@@ -355,9 +388,14 @@ def export_scene(scene=None, depsgraph=None, spp: int = 64, max_depth: int | Non
         original = obj.original if hasattr(obj, "original") else obj
         if original.hide_render:
             continue
+        parent = inst.parent if inst.is_instance else None
+        if parent is not None and parent.type == "CURVE" and parent.original == original:
+            continue  # a curve's own evaluated mesh (listed as its instance since Blender 3.0): the curve is exported itself
         world = _matrix(inst.matrix_world)
         if obj.type == "MESH" and (original.name in heightfields or getattr(original, "limn_heightfield", False)):
             _export_heightfield_object(original, obj, world, desc, warnings, used_ids)
+        elif obj.type in ("CURVE", "CURVES") and _export_curve_object(original, obj, world, desc, warnings, used_ids):
+            pass
         elif obj.type in MESH_TYPES:
             _export_mesh_object(obj, world, desc, warnings, used_ids)
         elif obj.type == "LIGHT":

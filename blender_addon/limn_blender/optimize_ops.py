@@ -24,7 +24,14 @@ objects marked as limn heightfields and for meshes with an image Displace modifi
 SDF mode (sdf.py) voxelises a closed mesh into a limn signed-distance grid (`sdf_resolution`
 samples along its longest side), optimises the grid's values and writes the result back into the
 mesh by marching cubes (its vertices and faces are replaced; one undo step restores them).
-    limn_blender.optimize(obj, [(camera, image), ...], mode="SDF", sdf_resolution=32)"""
+    limn_blender.optimize(obj, [(camera, image), ...], mode="SDF", sdf_resolution=32)
+
+Curve mode optimises the control points and radii of a curve object's limn fibre curves
+(curves.py): a legacy Curve with a round bevel (NURBS, poly and Bezier splines) or a hair Curves
+object. Mode "AUTO" picks it for both object types. The result goes back into the same object
+type with the same point counts. Radii are clamped after every step to at least 1/100 of the
+smallest starting radius (curves.RADIUS_FLOOR); Large Steps (lambda) is not used for curves.
+    limn_blender.optimize(curve_obj, [(camera, image), ...])"""
 from __future__ import annotations
 
 import threading
@@ -33,7 +40,7 @@ import time
 import bpy
 import numpy as np
 
-from . import exporter, heightfield, jobs, sdf
+from . import curves, exporter, heightfield, jobs, sdf
 from .render_ops import _limn, end_worker, redraw_panels, start_modal
 
 
@@ -71,7 +78,15 @@ def _unsaved(image) -> bool:
     return not isinstance(image, str) and image.source == "GENERATED" and image.packed_file is None
 
 
-MODES = ("AUTO", "MESH", "HEIGHTFIELD", "SDF")
+MODES = ("AUTO", "MESH", "HEIGHTFIELD", "SDF", "CURVE")
+CURVE_TYPES = ("CURVE", "CURVES")
+# What each object type's data is called in messages and in bpy.data.
+_DATA = {"MESH": ("mesh", "meshes"), "CURVE": ("curve", "curves"), "CURVES": ("hair curves", "hair_curves")}
+
+
+def data_key(obj) -> tuple[str, int]:
+    """(kind, address) of the datablock an optimisation of `obj` writes (one job per datablock)."""
+    return _DATA.get(obj.type, ("data", ""))[0], obj.data.as_pointer()
 
 
 def _unpack_target(i: int, entry):
@@ -107,26 +122,36 @@ def _check_light_setup(i: int, cam, image, lights) -> None:
 
 
 def resolve_mode(obj, mode: str) -> str:
-    """Returns "MESH", "HEIGHTFIELD" or "SDF" for the object and the chosen mode (one of MODES; "AUTO"
-    never picks "SDF")."""
+    """Returns "MESH", "HEIGHTFIELD", "SDF" or "CURVE" for the object and the chosen mode (one of
+    MODES; "AUTO" never picks "SDF")."""
     if mode not in MODES:
         raise ValueError(f"optimisation mode must be one of {', '.join(MODES)} (got {mode!r})")
+    is_curve = obj.type in CURVE_TYPES
+    if mode not in ("AUTO", "CURVE") and is_curve:
+        raise ValueError(f"object '{obj.name}' is a {'hair curves' if obj.type == 'CURVES' else 'curve'} object; "
+                         f"choose the curve mode (or Detect) to optimise its control points (got {mode})")
+    if mode == "CURVE" and not is_curve:
+        raise ValueError(f"object '{obj.name}' is a {obj.type.lower()} object; the curve mode optimises Curve and "
+                         "hair Curves objects")
     if mode != "AUTO":
         return mode
+    if is_curve:
+        return "CURVE"
     marked = getattr(obj, "limn_heightfield", False)
     return "HEIGHTFIELD" if marked or heightfield.has_image_displace(obj) else "MESH"
 
 
 class Problem:
     """The optimisation problem built from the Blender scene (main thread only): the limn scene and
-    target per camera, the parameter `name`, the Large-Steps `faces`, the `mask` (or None) and
-    write_back(x) for the mesh vertices, the heightfield's heights or the SDF grid's values.
-    prepare() (any thread; SDF mode voxelises there) must run before the views are used."""
+    target per camera, the parameter `name`, the Large-Steps `faces`, the `mask` (or None), the
+    `project` applied after each step (or None) and write_back(x) for the mesh vertices, the
+    heightfield's heights, the SDF grid's values or the curves' control points. prepare() (any
+    thread; SDF mode voxelises there) must run before the views are used."""
 
     def __init__(self, obj, targets, spp: int, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None,
                  sdf_resolution: int = 32, sdf_padding: float = 0.1):
-        if obj is None or obj.type != "MESH":
-            raise ValueError("choose a mesh object to optimise")
+        if obj is None or obj.type not in ("MESH", *CURVE_TYPES):
+            raise ValueError("choose a mesh, curve or hair curves object to optimise")
         if not targets:
             raise ValueError("give at least one (camera, target image) pair")
         targets = [_unpack_target(i, t) for i, t in enumerate(targets)]
@@ -136,13 +161,19 @@ class Problem:
         if self.mode == "MESH" and getattr(obj, "limn_heightfield", False):
             raise ValueError(f"object '{obj.name}' is marked as a limn heightfield; choose the heightfield mode or "
                              "clear the mark to optimise its vertices")
-        if self.mode in ("MESH", "SDF") and (mask_vertex_group or mask_image is not None):
-            what = "mesh vertices" if self.mode == "MESH" else "a signed-distance grid"
+        if self.mode in ("MESH", "SDF", "CURVE") and (mask_vertex_group or mask_image is not None):
+            what = {"MESH": "mesh vertices", "SDF": "a signed-distance grid", "CURVE": "curve control points"}[self.mode]
             raise ValueError(f"object '{obj.name}' is optimised as {what}; masks (vertex group, mask image) "
                              "are for the heightfield mode")
         self.limn = _limn()
         self.obj = obj
-        self.vertex_count = len(obj.data.vertices)
+        self.vertex_count = len(obj.data.vertices) if obj.type == "MESH" else 0
+        self.project = self.gradient = None
+        if self.mode == "CURVE":
+            self._check_curve_object(obj)
+        self.curves = curves.Source(obj) if self.mode == "CURVE" else None  # refuses what it cannot write back
+        if self.curves is not None:  # refuses a transform the tubes cannot follow (non-uniform scale)
+            self.curves.world_control(np.array([list(row) for row in obj.matrix_world]))
         self.warnings = [f"target image '{image.name}' is a generated image that is not packed: it is lost when "
                          "the file is saved (Image > Pack keeps it)" for _, image, _ in targets if _unsaved(image)]
         # Heights and mask first: a non-grid mesh, a bad Displace set-up or mask fails before any export.
@@ -194,6 +225,18 @@ class Problem:
             self.faces = self.limn.optim.grid_faces(src.rows, src.columns)
             self._refs = self._make_refs()
             return
+        self.world = np.array([list(row) for row in obj.matrix_world], dtype=np.float64)
+        if self.curves is not None:
+            if shape.get("type") != "bsplinecurve":
+                raise ValueError(f"object '{obj.name}' was not exported as limn fibre curves")
+            self.name = f"{obj.name}.control_points"
+            self.faces = None
+            self.counts = self.curves.counts()
+            self.project = lambda x: self.curves.project(x, self.world)
+            self.gradient = self.curves.gradient
+            self.warnings += self.curves.warnings
+            self._refs = self._make_refs()
+            return
         self.faces = shape["faces"]
         self.name = f"{obj.name}.vertex_positions"
         n = len(obj.data.vertices)
@@ -201,7 +244,6 @@ class Problem:
         if len(shape["vertex_positions"]) != n or len(welded) != n:
             raise ValueError(f"object '{obj.name}': its modifiers change the vertices or it has coincident vertices "
                              f"({n} in the mesh, {len(welded)} rendered); apply or remove them before optimising")
-        self.world = np.array([list(row) for row in obj.matrix_world], dtype=np.float64)
         self._refs = self._make_refs()
 
     def prepare(self, progress=None) -> None:
@@ -220,10 +262,31 @@ class Problem:
             self.views.append((self.limn.load_dict(desc, source=source), pixels))
         self._pending = []
 
+    @staticmethod
+    def _check_curve_object(obj) -> None:
+        """Refuses a curve object whose render is not its own control points: a legacy curve that is
+        not a round bevel tube (exported as a mesh), a hair object whose modifiers move its points."""
+        if obj.type == "CURVE":
+            why = curves.fibre_reason(obj)
+            if why:
+                raise ValueError(f"curve object '{obj.name}' is not rendered as limn fibre curves: {why}; limn "
+                                 "optimises curves with a round bevel (bevel depth > 0) and no modifiers")
+            if not getattr(obj.data, "use_radius", True):
+                raise ValueError(f"curve object '{obj.name}': its option Radius (Geometry) is off, so Blender's tube "
+                                 "ignores the point radii the optimisation writes; turn it on")
+            return
+        evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+        here = curves.Source(obj).control
+        there = curves.Source(obj, evaluated).control
+        if here.shape != there.shape or not np.array_equal(here, there):
+            raise ValueError(f"hair object '{obj.name}': its modifiers change its points, so optimised points cannot "
+                             "be written back into them; apply or disable the modifiers first")
+
     # ---- the datablocks the run writes: still there, still the same? ---------------------------------
     def _make_refs(self):
         """(bpy.data collection, name, address, kind) of what write_back writes into."""
-        blocks = [("objects", self.obj, "object"), ("meshes", self.obj.data, "mesh")]
+        kind, coll = _DATA[self.obj.type]
+        blocks = [("objects", self.obj, "object"), (coll, self.obj.data, kind)]
         if self.source is not None and self.source.kind == "displace":
             blocks += [("textures", self.source.texture, "texture"), ("images", self.source.image, "image")]
         return [(coll, b.name, b.as_pointer(), kind) for coll, b, kind in blocks]
@@ -249,14 +312,20 @@ class Problem:
                     return f"{kind} '{name}' was renamed to '{renamed.name}'"
                 return f"{kind} '{name}' was deleted" + (" or replaced (undo?)" if block is not None else "")
             found[kind] = block
-        obj, mesh = found["object"], found["mesh"]
+        kind = _DATA[self.obj.type][0]
+        obj, mesh = found["object"], found[kind]
         name = obj.name
         if not obj.users_scene:
             return f"object '{name}' was deleted (it is in no scene any more)"
         if obj.data is None or obj.data.as_pointer() != mesh.as_pointer():
-            return f"object '{name}' uses another mesh now"
-        if obj.mode == "EDIT" or mesh.is_editmode:
-            return f"object '{name}' entered Edit Mode (its mesh is not written while it is edited)"
+            return f"object '{name}' uses another {kind} now"
+        if obj.mode == "EDIT" or getattr(mesh, "is_editmode", False):
+            return f"object '{name}' entered Edit Mode (its {kind} is not written while it is edited)"
+        if self.curves is not None:
+            self.obj = self.curves.obj = obj
+            if self.curves.counts() != self.counts:
+                return f"{kind} '{mesh.name}' has other point counts now than at the start (points added or deleted)"
+            return ""
         if self.sdf is None and (self.source is None or self.source.kind == "grid") and len(mesh.vertices) != self.vertex_count:
             return f"mesh '{mesh.name}' has {len(mesh.vertices)} vertices now ({self.vertex_count} at the start)"
         if self.source is not None and self.source.kind == "displace":
@@ -286,6 +355,9 @@ class Problem:
             self.source.write_back(x, final=final)
             self._refs = self._make_refs()  # a new "<name> (limn)" image may have replaced the texture's
             return
+        if self.curves is not None:
+            self.curves.write_back(np.asarray(x, dtype=np.float64).reshape(-1, 4), self.world)
+            return
         inv = np.linalg.inv(self.world)
         local = x.astype(np.float64) @ inv[:3, :3].T + inv[:3, 3]
         self.obj.data.vertices.foreach_set("co", local.astype(np.float32).ravel())
@@ -296,9 +368,10 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
              progress=None, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None,
              sdf_resolution: int = 32, sdf_padding: float = 0.1) -> dict:
     """Blocking optimisation; writes the result into the mesh (or the heightfield's image / grid,
-    or the SDF's marching cubes into the mesh). progress(iteration, loss) may return False to stop.
-    Returns {"losses": [...], "seconds": ..., "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD" |
-    "SDF"}; SDF mode adds "sdf_shape" (nz, ny, nx) and "voxel" (world units)."""
+    the SDF's marching cubes into the mesh, or the control points into the curve object).
+    progress(iteration, loss) may return False to stop. Returns {"losses": [...], "seconds": ...,
+    "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD" | "SDF" | "CURVE"}; SDF mode adds "sdf_shape"
+    (nz, ny, nx) and "voxel" (world units)."""
     problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image, sdf_resolution, sdf_padding)
     running = jobs.busy(problem.keys)
     if running is not None:  # a job in the UI writes the same object
@@ -310,7 +383,8 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
 
     t0 = time.perf_counter()
     result = problem.limn.optim.fit(problem.views, problem.name, iterations=iterations, lr=lr, lambda_=lambda_, spp=spp,
-                                    faces=problem.faces, mask=problem.mask, callback=callback)
+                                    faces=problem.faces, mask=problem.mask, callback=callback,
+                                    project=problem.project, gradient=problem.gradient)
     problem.write_back(problem.views[0][0].params[problem.name])
     out = {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled,
            "mode": problem.mode}
@@ -376,7 +450,8 @@ class OptimizeJob(jobs.Job):
             problem.prepare(self.keep_going)  # SDF: voxelise here, off the main thread
             views = [(_Cancellable(scene, self.keep_going), target) for scene, target in problem.views]
             problem.limn.optim.fit(views, problem.name, iterations=self.iterations, spp=spp, lr=lr, lambda_=lambda_,
-                                   faces=problem.faces, mask=problem.mask, callback=callback)
+                                   faces=problem.faces, mask=problem.mask, callback=callback, project=problem.project,
+                                   gradient=problem.gradient)
         except problem.limn.RenderCancelled:
             if not self.cancelled:
                 raise
@@ -476,10 +551,11 @@ class LIMN_OT_target_add(bpy.types.Operator):
 def _mode_inputs(s) -> dict:
     """The panel's mode and masks as keyword arguments of Problem / optimize (the panel hides the
     masks in mesh mode, so they are not passed then)."""
-    if s.optimize_mode == "MESH":
-        return {"mode": "MESH"}
+    obj = s.optimize_object
     if s.optimize_mode == "SDF":
         return {"mode": "SDF", "sdf_resolution": s.sdf_resolution, "sdf_padding": s.sdf_padding}
+    if s.optimize_mode in ("MESH", "CURVE") or (obj is not None and obj.type in CURVE_TYPES):
+        return {"mode": s.optimize_mode}
     return {"mode": s.optimize_mode, "mask_vertex_group": s.mask_vertex_group, "mask_image": s.mask_image}
 
 
@@ -581,7 +657,7 @@ def _running_on(s):
         return None
     keys = {("object", obj.as_pointer())}
     if obj.data is not None:
-        keys.add(("mesh", obj.data.as_pointer()))
+        keys.add(data_key(obj))
     return jobs.busy(keys)
 
 

@@ -182,3 +182,30 @@ def build_heightfield(kind="displace", n=17, res=24):
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.1, 0.1, 0.1, 1.0)
     scene.world = world
     return scene
+
+
+def add_curve(name, kind, points, radii, bevel, order=4, cyclic=False, material=True):
+    """A legacy Curve object (3D, round bevel of depth `bevel`) with one spline of `kind` (NURBS,
+    POLY or BEZIER with automatic handles) on / through `points` (n x 3) with point radii `radii`."""
+    cu = bpy.data.curves.new(name, "CURVE")
+    cu.dimensions = "3D"
+    cu.bevel_depth = bevel
+    sp = cu.splines.new(kind)
+    if kind == "BEZIER":
+        sp.bezier_points.add(len(points) - 1)
+        for p, co, r in zip(sp.bezier_points, points, radii):
+            p.co, p.radius = tuple(co), float(r)
+            p.handle_left_type = p.handle_right_type = "AUTO"
+    else:
+        sp.points.add(len(points) - 1)
+        for p, co, r in zip(sp.points, points, radii):
+            p.co, p.radius = (*co, 1.0), float(r)
+        if kind == "NURBS":
+            sp.order_u = order
+            sp.use_endpoint_u = sp.use_bezier_u = False
+    sp.use_cyclic_u = cyclic
+    obj = bpy.data.objects.new(name, cu)
+    bpy.context.scene.collection.objects.link(obj)
+    if material:
+        cu.materials.append(bpy.data.materials.new(f"{name}_mat"))
+    return obj

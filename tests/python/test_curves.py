@@ -242,3 +242,38 @@ def test_yarn_with_fine_guides_is_heavy_tailed():
     scene, name, t, fd = yarn_with_fd("area")
     on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=512, guiding="grid", seed=50 + k) for k in range(8)])
     assert np.abs(block_z(on, fd)).max() < 5.0
+
+
+def test_fit_moves_control_points_as_rows_and_projects_them(tmp_path):
+    """limn.optim.fit on "<id>.control_points" (N x 4 rows): a target of the same fibre with thin
+    radii pulls the radii down; project() (here a clamp at 0.1, as the Blender add-on's radius floor)
+    is applied after every step, so no radius goes below it, the clamp is reached, and the scene holds
+    the projected values. Without the clamp the same run takes radii below 0.1."""
+    thin = BENT.copy()
+    thin[:, 3] *= 0.3
+    target = limn.load_dict(envmap_scene(tmp_path, curve(thin)), base_dir=tmp_path).render(spp=64, seed=1)
+    seen = []
+
+    def clamp(x):
+        assert x.shape == BENT.shape
+        x[:, 3] = np.maximum(x[:, 3], 0.1)
+        return x
+
+    def run(project):
+        scene = limn.load_dict(envmap_scene(tmp_path, curve(BENT)), base_dir=tmp_path)
+        result = quiet(limn.optim.fit, [(scene, target)], "obj.control_points", iterations=12, lr=0.02, spp=16,
+                       project=project, callback=lambda it, loss, x: seen.append(x.copy()))
+        return scene.params["obj.control_points"], result
+
+    clamped, result = run(clamp)
+    assert len(result.losses) == 12 and not result.diverged
+    assert result.losses[-1] < result.losses[0]
+    assert all(x.shape == BENT.shape and x[:, 3].min() >= 0.1 - 1e-7 for x in seen[1:])
+    assert clamped[:, 3].min() == pytest.approx(0.1) and (clamped[:, 3] < BENT[:, 3] - 0.01).any()
+    # Without it the radii go lower (and may reach 0, where the scene refuses them and fit stops,
+    # restoring the last good state: before fit copied Adam's parameters, that "last good state" was
+    # the refused one and restoring it raised).
+    free, free_result = run(None)
+    assert free[:, 3].min() < 0.1 - 1e-3 and (free[:, 3] > 0).all()
+    print(f"fit on control points: loss {result.losses[0]:.5f} -> {result.losses[-1]:.5f}; smallest radius "
+          f"{clamped[:, 3].min():.4f} clamped, {free[:, 3].min():.4f} free ({free_result.diverged or 'ran to the end'})")

@@ -256,3 +256,49 @@ def ctrl_q_mid_optimise(d):
     subprocess.run(["xdotool", "key", "d"], check=True, timeout=10)  # the dialog's accelerator of Don't Save
     yield 60                           # Blender quits; the driver's own quit is not reached
     d.record(still_running_after_dont_save=True)
+
+
+# ---- a curve object optimised from the panel ----------------------------------------------------------
+def curve_optimise(d):
+    """The modal operator on a NURBS curve object (round bevel): progress while it runs (the spline's
+    points change while the worker is alive), the end, and one undo step that brings the start back."""
+    addon = yield from _setup(d, 48, 36)
+    from limn_blender.render_ops import _limn
+    limn = _limn()
+    scene = bpy.context.scene
+    bpy.data.objects.remove(bpy.data.objects["ball"])
+    pts = np.array([[-1.6, 0.0, 0.9], [-0.9, 0.2, 1.3], [-0.2, -0.1, 0.8], [0.5, 0.1, 1.2], [1.2, 0.0, 0.9], [1.8, 0.1, 1.1]])
+    import scene_builder
+    fibre = scene_builder.add_curve("fibre", "NURBS", pts + [0, 0, 0.25], [1.4] * 6, 0.12)  # the target's curve
+    desc, _ = addon.export_scene(spp=16)
+    px = limn.load_dict(desc).render(spp=16, seed=5)
+    img = bpy.data.images.new("target", 48, 36, float_buffer=True)
+    rgba = np.ones((36, 48, 4), np.float32)
+    rgba[..., :3] = px[::-1]
+    img.pixels.foreach_set(rgba.ravel())
+    img.pack()
+    for p, co in zip(fibre.data.splines[0].points, pts):
+        p.co, p.radius = (*co, 1.0), 1.0
+    s = scene.limn
+    t = s.targets.add()
+    t.camera, t.image = bpy.data.objects["camera"], img
+    s.optimize_object = fibre
+    s.iterations, s.spp, s.learning_rate = 40, 4, 0.01
+    bpy.ops.ed.undo_push(message="before limn")
+
+    def points():
+        return np.array([(*p.co[:3], p.radius) for p in bpy.data.objects["fibre"].data.splines[0].points])
+
+    start = points()
+    before = {t.ident for t in threading.enumerate()}
+    d.record(invoke=str(d.call(bpy.ops.limn.optimize)))
+    moved = yield from _wait_for(lambda: not np.array_equal(points(), start), 60)
+    d.record(moved_while_running=bool(moved and _workers(before)))
+    ended = yield from _wait_for(lambda: not _workers(before), 120)
+    yield 0.5                          # the modal operator's last tick writes the result
+    end = points()
+    d.record(ended=ended, count=len(end), moved_at_end=float(np.abs(end - start).max()),
+             still_a_curve=bpy.data.objects["fibre"].type == "CURVE")
+    d.call(bpy.ops.ed.undo)
+    yield 0.5
+    d.record(undo_restored=bool(np.allclose(points(), start, atol=1e-6)))

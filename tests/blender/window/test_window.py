@@ -161,3 +161,14 @@ def test_escape_key_cancels_and_keeps_the_last_state(tmp_path, display):
     assert re.search(r"limn: iteration \d+/400, loss [0-9.]+, cancelled \(Esc pressed\)", output), output[-1500:]
     # Blender 3.4 exits with its global break flag, which any Esc press sets: 1 (also without limn).
     assert_clean_exit(code, output, facts, expected=1)
+
+
+def test_curve_object_optimised_from_the_panel(tmp_path, display):
+    """The modal operator on a curve object: it writes the spline while running, ends, and one undo
+    brings the start back."""
+    code, output, facts, _ = run_scenario("curve_optimise", tmp_path, display)
+    assert facts.get("invoke") == "{'RUNNING_MODAL'}", facts
+    assert facts.get("moved_while_running") and facts.get("ended"), facts
+    assert facts.get("count") == 6 and facts.get("still_a_curve") and facts.get("moved_at_end", 0) > 1e-3, facts
+    assert facts.get("undo_restored"), facts
+    assert_clean_exit(code, output, facts)
