@@ -317,8 +317,11 @@ def summarize(ratios):
     lo, hi = min(r[1] for r in ratios), max(r[1] for r in ratios)
     ahead = "limn ahead" if lo > 1 else ("Mitsuba ahead" if hi < 1 else "mixed")
     capped = sum(1 for r in ratios if r[2])
-    span = f"{ratios[0][0]:.2g}-{ratios[-1][0]:.2g} s"
-    s = f"{ahead}: Mitsuba's error / limn's {fmt_ratio(lo)} to {fmt_ratio(hi)} over {span} ({len(ratios)} times)"
+    if len(ratios) == 1:
+        s = f"{ahead}: Mitsuba's error / limn's {fmt_ratio(lo)} at {ratios[0][0]:.2g} s (the only shared time)"
+    else:
+        s = (f"{ahead}: Mitsuba's error / limn's {fmt_ratio(lo)} to {fmt_ratio(hi)} over "
+             f"{ratios[0][0]:.2g}-{ratios[-1][0]:.2g} s ({len(ratios)} times)")
     if capped:
         s += f"; {capped} of them with an error within {CAP:g}x of the reference's noise (capped: the true ratio is further from 1)"
     return s
