@@ -30,11 +30,24 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
                                 std::to_string(options.interval_uniform_share) + ")");
   for (size_t i = 0; i < scene.shapes.size(); ++i) {
     const Shape& s = scene.shapes[i];
-    if (std::holds_alternative<Heightfield>(s.geometry)) {
-      if (m_shape >= 0)
-        throw std::invalid_argument(where + "the scene has more than one heightfield ('" + scene.shapes[m_shape].id + "', '" + s.id +
-                                    "'); one differentiable heightfield per scene is supported");
-      m_shape = int(i);
+    if (const auto* hf = std::get_if<Heightfield>(&s.geometry)) {
+      // Directions are global spherical coordinates around the first heightfield's up axis; a
+      // vertical slice of it is a vertical slice of every other field (and theta is the same in
+      // each local frame: similarities keep angles) only when their up axes are parallel.
+      const Vec3d up = glm::normalize(Vec3d(hf->world_from_local.vector(Vec3(0, 0, 1))));
+      if (m_shape >= 0) {
+        const Heightfield& first = std::get<Heightfield>(scene.shapes[m_shape].geometry);
+        const Vec3d up0 = glm::normalize(Vec3d(first.world_from_local.vector(Vec3(0, 0, 1))));
+        if (glm::dot(up, up0) < 1.0 - 1e-6)  // ~0.08 degrees: beyond float rounding of a rotation
+          throw std::invalid_argument(where + "heightfield '" + s.id + "' has its up axis (" + std::to_string(up.x) + ", " +
+                                      std::to_string(up.y) + ", " + std::to_string(up.z) + ") not along that of heightfield '" +
+                                      scene.shapes[m_shape].id + "' (" + std::to_string(up0.x) + ", " + std::to_string(up0.y) +
+                                      ", " + std::to_string(up0.z) + "); the estimator splits vertical slices, so all "
+                                      "heightfields of a scene must share their up direction (rotations about it are fine)");
+      } else {
+        m_shape = int(i);
+      }
+      m_shapes.push_back(int(i));
     }
     const Bsdf& b = scene.bsdfs[s.bsdf];
     if (b.is_delta() || b.transmits())
@@ -46,8 +59,8 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
   if (m_shape < 0) throw std::invalid_argument(where + "the scene has no heightfield");
   for (int si : params.moving_shapes()) {
     const Shape& s = scene.shapes[si];
-    if (si != m_shape && !(std::holds_alternative<Mesh>(s.geometry) && s.emitter >= 0))
-      throw std::invalid_argument(where + "shape '" + s.id + "' is differentiable; with a heightfield only its heights and "
+    if (!std::holds_alternative<Heightfield>(s.geometry) && !(std::holds_alternative<Mesh>(s.geometry) && s.emitter >= 0))
+      throw std::invalid_argument(where + "shape '" + s.id + "' is differentiable; with heightfields only their heights and "
                                   "area emitters (meshes) may move, because other shapes' silhouettes are not split");
   }
   for (size_t i = 0; i < scene.emitters.size(); ++i) {
@@ -117,10 +130,11 @@ IntervalChoice choose_interval(const std::vector<Cut>& cut, double share, double
 // (uniform phi over the hull: 124-130 plus single samples of 100x the pixel's mean).
 constexpr double kAzimuthUniformShare = 0.1;
 
-// The origin of a slice, in the heightfield's local frame.
+// The origin of a slice, in the first heightfield's local frame, and in the world.
 struct Origin {
   VV p;          // taped
   Vec3d p0;      // primal
+  VV world;      // taped
 };
 
 }  // namespace
@@ -131,11 +145,19 @@ struct HeightfieldPath {
   PathInputs& in;
   HeightfieldCounters& cnt;
   Pcg32& rng;
-  DiffHeightfieldFrame F;
+  std::vector<DiffHeightfieldFrame> frames;  // one per heightfield, E.m_shapes' order
+  const DiffHeightfieldFrame& F;             // the first: its local frame holds (phi, theta)
   Replay R;
 
+  static std::vector<DiffHeightfieldFrame> make_frames(const HeightfieldEstimator& e, PathInputs& inputs) {
+    std::vector<DiffHeightfieldFrame> f;
+    f.reserve(e.m_shapes.size());
+    for (int s : e.m_shapes) f.emplace_back(e.m_scene, e.m_params, inputs, s);
+    return f;
+  }
+
   HeightfieldPath(const HeightfieldEstimator& e, PathInputs& inputs, HeightfieldCounters& counters, Pcg32& r)
-      : E(e), scene(e.m_scene), in(inputs), cnt(counters), rng(r), F(e.m_scene, e.m_params, inputs, e.m_shape),
+      : E(e), scene(e.m_scene), in(inputs), cnt(counters), rng(r), frames(make_frames(e, inputs)), F(frames[0]),
         R{e.m_scene, e.m_params, inputs} {}
 
   const Heightfield& hf() const { return F.hf; }
@@ -144,6 +166,7 @@ struct HeightfieldPath {
     Origin o;
     o.p = F.to_local_point(p_world);
     o.p0 = Vec3d(o.p.x.v, o.p.y.v, o.p.z.v);
+    o.world = p_world;
     return o;
   }
 
@@ -200,6 +223,16 @@ struct HeightfieldPath {
     return true;
   }
 
+  // Horizontal distance from og along (dx, dy) to the footprint edge that the primal border point
+  // at distance t0 lies on (the nearer of the x and y edges).
+  static Var border_t(const Heightfield& hf, const VV& og, const Var& dx, const Var& dy, double t0) {
+    const double x = og.x.v + dx.v * t0, y = og.y.v + dy.v * t0;
+    const double ex = std::abs(std::abs(x) - 0.5 * hf.width), ey = std::abs(std::abs(y) - 0.5 * hf.depth);
+    if (ex <= ey && std::abs(dx.v) > 1e-12) return (Var(std::copysign(0.5 * hf.width, x)) - og.x) / dx;
+    if (std::abs(dy.v) > 1e-12) return (Var(std::copysign(0.5 * hf.depth, y)) - og.y) / dy;
+    return Var(t0);  // a slice along the edge itself: measure zero
+  }
+
   // Samples theta in [lo, hi] for the slice at azimuth phi (Eq. 10-11): split at the peaks (and at
   // every emitter edge), choose one interval (choose_interval) and map linearly between its
   // taped end points. weight = 1 / pdf(theta) with the end points' motion in it.
@@ -221,24 +254,40 @@ struct HeightfieldPath {
       hi = b;
       inv_p = n;
     }
-    // Peaks with theta in (lo, hi): slopes in (cot hi, cot lo).
-    const glm::dvec2 d(std::cos(phi.v), std::sin(phi.v));
-    ++cnt.searches;
-    bool blocked = false;
-    const std::vector<SlicePeak> peaks =
-        find_peaks(hf(), o.p0, d, slope_of(hi.v), slope_of(lo.v), E.m_opt.search, &cnt.search, &blocked);
-    if (visible_only && blocked) return false;
-    const Var dx = cos(phi), dy = sin(phi);
+    // Peaks with theta in (lo, hi): slopes in (cot hi, cot lo), in every heightfield's slice at
+    // phi (each in its own local frame; theta is the same there, the up axes being parallel).
     std::vector<Split> splits;
-    for (const SlicePeak& p : peaks) {
-      // The peak at fixed horizontal distance: k is stationary in t there (Eq. 12), so its
-      // derivative is the partial at fixed t. Border points are fixed in t by the footprint.
-      Var z, zx, zy;
-      F.height(in, o.p.x + dx * Var(p.t), o.p.y + dy * Var(p.t), z, zx, zy);
-      const Var th = atan2(Var(p.t), z - o.p.z);
-      splits.push_back({th.v, th});
+    Split steepest{1e30, Var(0.0)};  // the smallest theta of a field's steepest peak
+    for (size_t f = 0; f < frames.size(); ++f) {
+      const DiffHeightfieldFrame& G = frames[f];
+      const VV og = f == 0 ? o.p : G.to_local_point(o.world);
+      Var dx = cos(phi), dy = sin(phi);
+      if (f > 0) {  // the horizontal direction at phi in this field's frame (a rotation about up, or a mirror)
+        const VV h = G.to_local_vector(F.to_world_vector(VV(dx, dy, Var(0.0))));
+        const Var n = sqrt(h.x * h.x + h.y * h.y);
+        dx = h.x / n;
+        dy = h.y / n;
+      }
+      ++cnt.searches;
+      bool blocked = false;
+      const std::vector<SlicePeak> peaks = find_peaks(G.hf, Vec3d(og.x.v, og.y.v, og.z.v), glm::dvec2(dx.v, dy.v), slope_of(hi.v),
+                                                      slope_of(lo.v), E.m_opt.search, &cnt.search, &blocked);
+      if (visible_only && blocked) return false;
+      for (const SlicePeak& p : peaks) {
+        // The peak at fixed horizontal distance: k is stationary in t there (Eq. 12), so its
+        // derivative is the partial at fixed t. A border point stays on its footprint edge, so
+        // its t follows the origin (which moves in this frame with the vertex, or when the field
+        // itself is translated).
+        const Var t = p.border ? border_t(G.hf, og, dx, dy, p.t) : Var(p.t);
+        Var z, zx, zy;
+        G.height(in, og.x + dx * t, og.y + dy * t, z, zx, zy);
+        const Var th = atan2(t, z - og.z);
+        splits.push_back({th.v, th});
+      }
+      // The last peak is this field's steepest: every direction below it meets this field.
+      if (!peaks.empty() && splits.back().v < steepest.v) steepest = splits.back();
     }
-    if (visible_only && !splits.empty() && splits.back().v < hi.v) hi = splits.back().var;  // the steepest peak
+    if (visible_only && steepest.v < hi.v) hi = steepest.var;
     if (!(hi.v > lo.v)) return false;
     for (size_t k = 0; k < E.m_area_emitters.size(); ++k) crossings(o, phi, emitter_triangles(k), splits);
     // The intervals of (lo, hi), end points sorted by primal value; coinciding splits are merged
@@ -269,15 +318,15 @@ struct HeightfieldPath {
   // Continuation range of a surface vertex: above the tangent plane for the heightfield (below it
   // a reflective BSDF is zero and the surface hides everything), the whole sphere elsewhere.
   Var horizon(const DiffVertex& x, const SurfaceInteraction& si, const Var& phi) const {
-    if (si.shape != E.m_shape) return Var(kPiD);
-    const VV n = F.to_local_vector(x.ng);  // (-zx, -zy, 1) / norm, scaled by 1 / scale
+    if (!std::holds_alternative<Heightfield>(scene.shapes[si.shape].geometry)) return Var(kPiD);
+    const VV n = F.to_local_vector(x.ng);  // (-zx, -zy, 1) / norm, scaled by 1 / scale (any field: the up axes agree)
     const Var k0 = -(n.x * cos(phi) + n.y * sin(phi)) / n.z;
     return atan2(Var(1.0), k0);
   }
 
   void note_hit(const SurfaceInteraction& si) {
     const Shape& s = scene.shapes[si.shape];
-    if (si.shape != E.m_shape && s.emitter < 0) ++cnt.other_shape_hits;
+    if (!std::holds_alternative<Heightfield>(s.geometry) && s.emitter < 0) ++cnt.other_shape_hits;
   }
 
   // Area emitters through emitter-domain sampling (App. A.1).
@@ -540,10 +589,13 @@ std::unique_ptr<HeightfieldEstimator> heightfield_estimator(const Scene& scene, 
 
 std::vector<std::string> HeightfieldEstimator::summary(int spp, const HeightfieldCounters& c) const {
   std::vector<std::string> s;
-  const Shape& shape = m_scene.shapes[m_shape];
-  const Heightfield& hf = std::get<Heightfield>(shape.geometry);
-  s.push_back("heightfield estimator (Tong et al. 2023) for '" + shape.id + "' (" + std::to_string(hf.nx) + " x " +
-              std::to_string(hf.ny) + " heights): " + std::to_string(spp) +
+  std::string fields;
+  for (int i : m_shapes) {
+    const Shape& shape = m_scene.shapes[i];
+    const Heightfield& hf = std::get<Heightfield>(shape.geometry);
+    fields += (fields.empty() ? "'" : ", '") + shape.id + "' (" + std::to_string(hf.nx) + " x " + std::to_string(hf.ny) + " heights)";
+  }
+  s.push_back("heightfield estimator (Tong et al. 2023) for " + fields + ": " + std::to_string(spp) +
               " paths per pixel, theta reparameterised at the discontinuities of each azimuth slice; " +
               std::to_string(c.searches) + " peak searches visited " + std::to_string(c.search.nodes) + " mipmap nodes and " +
               std::to_string(c.search.cells) + " cells" +

@@ -59,8 +59,8 @@ struct HeightfieldCounters {
 class HeightfieldEstimator {
  public:
   // Throws std::invalid_argument (naming the scene and object) for scenes the estimator cannot
-  // treat: more than one heightfield, delta or transmissive BSDFs, moving shapes other than the
-  // heightfield and area emitters, sphere emitters.
+  // treat: heightfields whose up axes differ, delta or transmissive BSDFs, moving shapes other than
+  // heightfields and area emitters, sphere emitters.
   HeightfieldEstimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options, int max_depth);
 
   // One sample of pixel (x, y) (box filter) as taped RGB.
@@ -79,7 +79,8 @@ class HeightfieldEstimator {
   const DiffParams& m_params;
   HeightfieldOptions m_opt;
   int m_max_depth;
-  int m_shape = -1;
+  int m_shape = -1;             // the first heightfield: its local frame holds the spherical coordinates
+  std::vector<int> m_shapes;    // every heightfield (m_shape first); all share the up axis
   std::vector<EmitterTriangles> m_area_emitters;
   std::vector<int> m_delta_emitters;
 
