@@ -16,8 +16,10 @@
 //     counted in delta_light_samples and named in the summary);
 //   * everything else by uniform phi and theta over the continuation range (App. A.2), which
 //     ignores area-emitter emission; escaping rays pick up infinite emitters.
-// The camera ray is the pixel domain in the same coordinates (App. A.1). Discontinuities caused by
-// other occluders than the heightfield and emitters (meshes and spheres without emission) are not
+// The camera ray is the pixel domain in the same coordinates (App. A.1). Several heightfields may
+// share a scene when their up axes are parallel: the coordinates are the first one's, and every
+// slice is split at each field's peaks (docs/heightfields.md). Discontinuities caused by
+// other occluders than heightfields and emitters (meshes and spheres without emission) are not
 // split; rays that hit them are counted (other_shape_hits), since they can bias the estimate.
 #pragma once
 #include <memory>
