@@ -195,8 +195,8 @@ def yarn_with_fd(light):
 def test_yarn_shadowing_itself_against_finite_differences(light, spp_boundary):
     """Two crossing strands of one curve shape: the upper strand moves, its shadow falls on the
     lower strand and on the floor (the indirect term with a curve as the receiver). Uniform
-    boundary samples: the guided estimators are precise enough to show a bias here that uniform
-    sampling's noise hides (test_yarn_with_guides_is_still_biased below)."""
+    boundary samples: the fine guides leave part of this self-shadow at their defensive share,
+    which makes 8 guided seeds heavy-tailed (test_yarn_with_fine_guides_is_heavy_tailed below)."""
     scene, name, t, fd = yarn_with_fd(light)
     on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=spp_boundary, guiding="none", seed=50 + k) for k in range(8)])
     off = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=0, seed=50 + k) for k in range(8)])
@@ -231,9 +231,14 @@ def test_stiff_curves_give_finite_images_and_derivatives(case):
     assert np.isfinite(img).all() and np.isfinite(fwd).all() and np.isfinite(grad[name]).all()
 
 
-@pytest.mark.xfail(strict=True, reason="open: the yarn's self-shadow under an area light is biased (docs/reports/curves/README.md, "
-                                       "the yarn pixel); guided samples (grid |z| 15, octree 13) resolve it, uniform ones (|z| 2.3) do not")
-def test_yarn_with_guides_is_still_biased():
+@pytest.mark.xfail(strict=True, reason="open: the projective grid misses part of the yarn's self-shadow, which it then samples "
+                                       "at its defensive share only (10 %): unbiased but heavy-tailed, so 8 seeds fail the z-test "
+                                       "(docs/derivatives.md; tests/bench/yarn_guides.py)")
+def test_yarn_with_fine_guides_is_heavy_tailed():
+    """Not a bias: over 48 seeds the default grid's pixels agree with uniform samples at 16x the
+    budget and with a coarse grid (R = 4) that has no holes (tests/bench/yarn_guides.py), but a few
+    seeds carry most of some pixels' value. This records the coverage gap until the projections
+    reach that part of the silhouette."""
     scene, name, t, fd = yarn_with_fd("area")
     on = np.stack([quiet(scene.render_forward, {name: t}, spp=64, spp_boundary=512, guiding="grid", seed=50 + k) for k in range(8)])
     assert np.abs(block_z(on, fd)).max() < 5.0
