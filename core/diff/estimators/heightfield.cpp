@@ -19,6 +19,8 @@ void HeightfieldCounters::add(const HeightfieldCounters& o) {
   other_shape_hits += o.other_shape_hits;
   delta_light_samples += o.delta_light_samples;
   empty_ranges += o.empty_ranges;
+  edge_samples += o.edge_samples;
+  edge_splats += o.edge_splats;
 }
 
 HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options,
@@ -79,6 +81,7 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
       m_area_emitters.push_back(std::move(t));
     } else if (std::holds_alternative<PointEmitter>(e.model) || std::holds_alternative<DirectionalEmitter>(e.model)) {
       m_delta_emitters.push_back(int(i));
+      if (std::holds_alternative<PointEmitter>(e.model)) m_point_lights.push_back(int(i));
     }
   }
 }
@@ -480,6 +483,105 @@ struct HeightfieldPath {
     return L;
   }
 
+  // The camera's view of world point p0: the hit along the camera ray towards it.
+  bool camera_sees(const Vec3& eye, const Vec3& p0, int shape) {
+    const Vec3 dv = p0 - eye;
+    const float dist = glm::length(dv);
+    SurfaceInteraction si;
+    ++cnt.rays;
+    if (!scene.intersect(Ray{eye, dv / dist, 0.0f, dist * 1.001f}, si)) return false;
+    // 1e-3 of the distance: the hit is the same surface point up to the intersector's rounding.
+    return si.shape == shape && std::abs(si.t - dist) <= 1e-3f * dist;
+  }
+
+  // The direct light of point light `light` at the camera's hit at film point f: visible or not,
+  // and whether the camera sees `shape` there.
+  bool probe(const Vec2& f, int shape, const Vec3& light, bool& lit) {
+    SurfaceInteraction si;
+    ++cnt.rays;
+    if (!scene.intersect(scene.camera.generate_ray(f), si) || si.shape != shape) return false;
+    ++cnt.rays;
+    lit = !scene.occluded(spawn_ray_to(si, light));
+    return true;
+  }
+
+  bool delta_edges(std::vector<HeightfieldSplat>& splats, std::vector<Var>& vel) {
+    const size_t K = E.m_point_lights.size(), NF = frames.size();
+    const int light = E.m_point_lights[std::min(K - 1, size_t(rng.next_float() * K))];
+    const DiffHeightfieldFrame& G = frames[std::min(NF - 1, size_t(rng.next_float() * NF))];
+    const PointEmitter& pt = std::get<PointEmitter>(scene.emitters[light].model);
+    const double phi0 = 2.0 * kPiD * double(rng.next_float());
+    const double inv_pdf = 2.0 * kPiD * double(K) * double(NF);
+    ++cnt.edge_samples;
+    const VV P = constant(pt.position);
+    const VV ol = G.to_local_point(P);
+    // phi is a tape input without a parameter slot: d(film)/d(phi) is read from its adjoint.
+    const Var phi = Var::input(phi0);
+    const Var dx = cos(phi), dy = sin(phi);
+    ++cnt.searches;
+    const std::vector<SlicePeak> peaks =
+        find_peaks(G.hf, Vec3d(ol.x.v, ol.y.v, ol.z.v), glm::dvec2(dx.v, dy.v), -1e30, 1e30, E.m_opt.search, &cnt.search);
+    const CameraView view(scene.camera);
+    const Vec3 eye = view.eye_world;
+    bool any = false;
+    for (const SlicePeak& p : peaks) {
+      const Var t = p.border ? border_t(G.hf, ol, dx, dy, p.t) : Var(p.t);
+      Var z, zx, zy;
+      G.height(in, ol.x + dx * t, ol.y + dy * t, z, zx, zy);
+      const VV xb = G.to_world_point(VV(ol.x + dx * t, ol.y + dy * t, z));
+      const VV D = ad::normalize(xb - P);
+      const Vec3 D0(float(D.x.v), float(D.y.v), float(D.z.v));
+      const float tb = float(ad::length(xb - P).v);
+      // The ray beyond the grazing point (1e-4 of its distance: past the tangency's rounding).
+      const Ray ray{pt.position, D0, tb * 1.0001f, std::numeric_limits<float>::infinity()};
+      SurfaceInteraction si;
+      ++cnt.rays;
+      if (!scene.intersect(ray, si)) continue;
+      const DiffVertex y = R.ray_hit(P, D, si, ray);
+      const Vec3 y0(float(y.p.x.v), float(y.p.y.v), float(y.p.z.v));
+      if (!camera_sees(eye, y0, si.shape)) continue;
+      const auto pc = view.proj.to_camera(y.p);
+      if (!(pc.z.v > view.proj.near)) continue;
+      Var fx, fy;
+      view.proj.film(pc, fx, fy);
+      // The edge's film tangent ds/dphi.
+      std::vector<double> adj;
+      ad::Tape::current().backward(fx.idx, 1.0, adj);
+      const double tx = phi.idx < int(adj.size()) ? adj[phi.idx] : 0.0;
+      ad::Tape::current().backward(fy.idx, 1.0, adj);
+      const double ty = phi.idx < int(adj.size()) ? adj[phi.idx] : 0.0;
+      const double len = std::sqrt(tx * tx + ty * ty);
+      if (!(len > 0.0) || !std::isfinite(len)) continue;
+      const glm::dvec2 n(-ty / len, tx / len);
+      // Probes 1e-3 pixels either side (as the primary term's): which side the light reaches.
+      const double delta = 1e-3;
+      bool lit_minus = false, lit_plus = false;
+      if (!probe(Vec2(float(fx.v - delta * n.x), float(fy.v - delta * n.y)), si.shape, pt.position, lit_minus) ||
+          !probe(Vec2(float(fx.v + delta * n.x), float(fy.v + delta * n.y)), si.shape, pt.position, lit_plus) || lit_minus == lit_plus)
+        continue;
+      // The point light's direct contribution at y towards the camera (primal).
+      const VV to_light = P - y.p;
+      const Var d2 = dot(to_light, to_light);
+      const VV wl = to_light / sqrt(d2), we = ad::normalize(constant(eye) - y.p);
+      const VV f = R.bsdf_eval(scene.shapes[si.shape].bsdf, y, we, wl) * R.emitter_value(light, pt.intensity) / d2 *
+                   R.point_falloff(pt, wl);
+      const double sign = lit_minus ? 1.0 : -1.0;  // f(s - delta n) - f(s + delta n)
+      const double w = sign * len * inv_pdf;
+      const Spectrum value(float(f.x.v * w), float(f.y.v * w), float(f.z.v * w));
+      const Var v = fx * Var(n.x) + fy * Var(n.y);
+      bool splatted = false;
+      scene.camera.splat(fx.v, fy.v, [&](int pixel, float wt) {
+        splats.push_back({pixel, value * wt, int(vel.size())});
+        splatted = true;
+      });
+      if (!splatted) continue;
+      vel.push_back(v);
+      ++cnt.edge_splats;
+      any = true;
+    }
+    return any;
+  }
+
   // Pixel (px, py) with a box filter: the pixel's cone turned into (phi, theta-range) (App. A.1).
   VV pixel(int px, int py) {
     if (E.m_max_depth == 0) return VV();
@@ -572,6 +674,13 @@ ad::V3<ad::Var> HeightfieldEstimator::pixel(int x, int y, Pcg32& rng, PathInputs
   return path.pixel(x, y);
 }
 
+bool HeightfieldEstimator::delta_edge_sample(Pcg32& rng, PathInputs& in, std::vector<HeightfieldSplat>& splats,
+                                             std::vector<ad::Var>& velocity, HeightfieldCounters& counters) const {
+  if (!has_delta_edges()) return false;
+  HeightfieldPath path(*this, in, counters, rng);
+  return path.delta_edges(splats, velocity);
+}
+
 std::unique_ptr<HeightfieldEstimator> heightfield_estimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options,
                                                             int max_depth, int spp) {
   if (!params.any_geometry()) return nullptr;
@@ -607,9 +716,14 @@ std::vector<std::string> HeightfieldEstimator::summary(int spp, const Heightfiel
                    ? ", theta searched in sub-ranges of " + std::to_string(m_opt.theta_subrange_degrees) + " degrees (App. C)"
                    : std::string()));
   s.push_back("primary visibility and indirect boundary terms: not needed (the heightfield estimator reparameterises them)");
+  if (c.edge_samples)
+    s.push_back("point-light shadow edges cast by heightfields: " + std::to_string(c.edge_samples) + " samples, " +
+                std::to_string(c.edge_splats) + " reached the film");
   if (c.delta_light_samples)
-    s.push_back("point/directional lights: " + std::to_string(c.delta_light_samples) +
-                " shadow rays; their shadow edges are not differentiated (use area emitters for shadow derivatives)");
+    s.push_back("point/directional lights: " + std::to_string(c.delta_light_samples) + " shadow rays; " +
+                (has_delta_edges() ? std::string("not differentiated: directional lights' shadow edges and other occluders' "
+                                                 "shadow edges on a heightfield")
+                                   : std::string("their shadow edges are not differentiated (use area emitters for shadow derivatives)")));
   if (c.other_shape_hits)
     s.push_back("warning: " + std::to_string(c.other_shape_hits) +
                 " rays met shapes other than the heightfield and emitters, whose silhouettes are not split: derivatives may be "

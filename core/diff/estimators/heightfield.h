@@ -46,6 +46,15 @@ struct HeightfieldOptions {
   // choosing one (Eq. 6). Only pixels holding a split cost more (a path per interval); on the cone
   // the summed per-pixel variance fell 7.7-8x at the same time per call, on the terrain it is the same.
   bool camera_every_interval = true;
+  // The boundary term of point lights' shadow edges cast by heightfields (delta_edge_sample).
+  bool delta_edges = true;
+};
+
+// One film splat of a boundary sample: value times the derivative of velocity[velocity].
+struct HeightfieldSplat {
+  int pixel;
+  Spectrum value;
+  int velocity;
 };
 
 struct HeightfieldCounters {
@@ -55,6 +64,8 @@ struct HeightfieldCounters {
   uint64_t other_shape_hits = 0;    // rays that met an occluder whose edges are not split
   uint64_t delta_light_samples = 0; // shadow rays to point / directional lights (edges not differentiated)
   uint64_t empty_ranges = 0;        // pixel or emitter samples whose theta-range was empty (value 0)
+  uint64_t edge_samples = 0;        // point-light shadow edge samples (delta_edge_sample)
+  uint64_t edge_splats = 0;         // ... that reached the film
   void add(const HeightfieldCounters& o);
 };
 
@@ -69,6 +80,17 @@ class HeightfieldEstimator {
   ad::V3<ad::Var> pixel(int x, int y, Pcg32& rng, PathInputs& in, HeightfieldCounters& counters) const;
 
   int heightfield_shape() const { return m_shape; }
+
+  // Point lights' shadow edges cast by the heightfields: a boundary term splatted to the film,
+  // since those edges are not split points of the slices the estimator samples. One sample: a
+  // point light, a field, an azimuth phi around the light (uniform); every peak of that slice
+  // seen from the light is a grazing ray (Eq. 12: its slope's derivative is the partial at fixed
+  // t); the ray continues to the receiver y, seen directly by the camera. Adds to the film point
+  // of y: (f(s - delta n) - f(s + delta n)) |ds/dphi| / pdf times d(s . n), n the film normal of
+  // the edge. Values are per sample (the caller divides by the count). False: nothing added.
+  bool delta_edge_sample(Pcg32& rng, PathInputs& in, std::vector<HeightfieldSplat>& splats, std::vector<ad::Var>& velocity,
+                         HeightfieldCounters& counters) const;
+  bool has_delta_edges() const { return m_opt.delta_edges && m_opt.reparameterize && !m_point_lights.empty(); }
   // What the estimator computed and left out, for DiffStats::summary.
   std::vector<std::string> summary(int spp, const HeightfieldCounters& counters) const;
 
@@ -85,6 +107,7 @@ class HeightfieldEstimator {
   std::vector<int> m_shapes;    // every heightfield (m_shape first); all share the up axis
   std::vector<EmitterTriangles> m_area_emitters;
   std::vector<int> m_delta_emitters;
+  std::vector<int> m_point_lights;
 
   friend struct HeightfieldPath;
 };
