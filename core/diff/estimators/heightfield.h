@@ -12,8 +12,9 @@
 //
 // Strategies per vertex (a partition, no MIS, so the derivative of each stays unbiased):
 //   * area emitters only through emitter-domain sampling (App. A.1), one emitter chosen uniformly;
-//   * point and directional lights by a shadow ray (their shadow edges are NOT differentiated:
-//     counted in delta_light_samples and named in the summary);
+//   * point and directional lights by a shadow ray; point lights' shadow edges cast by the
+//     heightfields by a boundary term splatted to the film (delta_edge_sample); directional lights'
+//     and other occluders' shadow edges are NOT differentiated (named in the summary);
 //   * everything else by uniform phi and theta over the continuation range (App. A.2), which
 //     ignores area-emitter emission; escaping rays pick up infinite emitters.
 // The camera ray is the pixel domain in the same coordinates (App. A.1). Several heightfields may
