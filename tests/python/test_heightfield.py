@@ -399,7 +399,7 @@ def projection_power(scene, tangents, on, off, fd, term_seeds=8, spp=16, **optio
     return {k: abs(projection_z(off + k * (on - off), fd, term)) for k in (1.0, 0.8, 1.25)}
 
 
-@pytest.mark.term("boundary", "interior")
+@pytest.mark.term("boundary")  # what a second field adds is its split points; its interior part was not measured for power
 def test_second_heightfield_moving_and_growing_agrees_with_fd():
     """Two heightfields in one scene, each with its own parameters: the second one moves towards
     the cone and grows; its silhouettes against the cone and the ground and its shadow move, and
@@ -445,7 +445,7 @@ def test_heightfields_with_different_up_axes_are_refused():
         scene.render_forward({}, spp=1)
 
 
-@pytest.mark.term("boundary", "interior")
+@pytest.mark.term("boundary")  # not "interior": it passes with the rest scaled by 0.8 or 1.25 (the edge dominates here)
 def test_point_light_shadow_edge_of_a_heightfield_agrees_with_fd():
     """The cone under a point light instead of the area light: its shadow on the field's ground
     has a hard edge, which moves as the cone grows. That edge is no split point of the slices the
