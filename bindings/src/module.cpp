@@ -163,6 +163,7 @@ const std::vector<DiffOptionField>& diff_option_fields() {
       field<bool>("heightfield_mipmap", [](DiffOptions& o) -> bool& { return o.heightfield.search.use_mipmap; }),
       field<bool>("heightfield_curvature_test", [](DiffOptions& o) -> bool& { return o.heightfield.search.curvature_test; }),
       field<bool>("heightfield_reparam", [](DiffOptions& o) -> bool& { return o.heightfield.reparameterize; }),
+      field<bool>("heightfield_delta_edges", [](DiffOptions& o) -> bool& { return o.heightfield.delta_edges; }),
       field<float>("heightfield_interval_mix", [](DiffOptions& o) -> float& { return o.heightfield.interval_uniform_share; }),
       field<bool>("heightfield_camera_every_interval", [](DiffOptions& o) -> bool& { return o.heightfield.camera_every_interval; }),
       field<float>("theta_subrange", [](DiffOptions& o) -> float& { return o.heightfield.theta_subrange_degrees; }),

@@ -145,7 +145,8 @@ void for_each_boundary_sample(uint64_t n, uint64_t tag, const DiffOptions& opt, 
   });
 }
 
-constexpr uint64_t kPrimaryTag = 0x7072696d61727921ULL, kIndirectTag = 0x696e646972656374ULL;
+constexpr uint64_t kPrimaryTag = 0x7072696d61727921ULL, kIndirectTag = 0x696e646972656374ULL,
+                   kHeightfieldEdgeTag = 0x6866656467657321ULL;
 
 uint64_t samples_for(const Scene& scene, int per_pixel) {
   return uint64_t(per_pixel) * uint64_t(scene.camera.width) * uint64_t(scene.camera.height);
@@ -312,6 +313,28 @@ Image forward(const Scene& scene, const DiffParams& params, const std::vector<do
     invalid += bad;
   });
   if (hfe) {
+    if (hfe->has_delta_edges()) {  // point lights' shadow edges cast by heightfields, splatted
+      ThreadSums images(size_t(W) * H * 3);
+      const uint64_t n = samples_for(scene, opt.spp_boundary > 0 ? opt.spp_boundary : spp);
+      for_each_boundary_sample(n, kHeightfieldEdgeTag, opt, [&](uint64_t, Pcg32& rng, PathInputs& in) {
+        std::vector<HeightfieldSplat> splats;
+        std::vector<ad::Var> vel;
+        HeightfieldCounters& c = hf_counters.local();
+        const uint64_t before = c.rays;
+        const bool ok = hfe->delta_edge_sample(rng, in, splats, vel, c);
+        rays += c.rays - before;
+        if (!ok) return;
+        std::vector<double> adj, d(vel.size(), 0.0);
+        for (size_t i = 0; i < vel.size(); ++i) d[i] = vel[i].is_constant() ? 0.0 : directional(vel[i], in, tangent, adj);
+        std::vector<double>& im = images.local();
+        for (const auto& sp : splats) {
+          if (!std::isfinite(d[sp.velocity])) continue;
+          for (int ch = 0; ch < 3; ++ch) im[3 * size_t(sp.pixel) + ch] += double(sp.value[ch]) * d[sp.velocity] / double(n);
+        }
+      });
+      const std::vector<double> splatted = images.reduce();
+      for (size_t i = 0; i < splatted.size(); ++i) img.rgb[i] += float(splatted[i]);
+    }
     ad::Tape::current().clear();
     finish_heightfield(stats, start, uint64_t(W) * H * spp, rays, invalid, scene, spp, opt, *hfe, hf_counters);
     return img;
@@ -383,6 +406,31 @@ std::vector<double> backward(const Scene& scene, const DiffParams& params, const
     invalid += bad;
   });
   if (hfe) {
+    if (hfe->has_delta_edges()) {  // point lights' shadow edges cast by heightfields, splatted
+      const uint64_t n = samples_for(scene, opt.spp_boundary > 0 ? opt.spp_boundary : spp);
+      for_each_boundary_sample(n, kHeightfieldEdgeTag, opt, [&](uint64_t, Pcg32& rng, PathInputs& in) {
+        std::vector<HeightfieldSplat> splats;
+        std::vector<ad::Var> vel;
+        HeightfieldCounters& c = hf_counters.local();
+        const uint64_t before = c.rays;
+        const bool ok = hfe->delta_edge_sample(rng, in, splats, vel, c);
+        rays += c.rays - before;
+        if (!ok) return;
+        std::vector<double> w(vel.size(), 0.0);
+        for (const auto& sp : splats) {
+          const float* a = &adjoint.rgb[3 * size_t(sp.pixel)];
+          w[sp.velocity] += (double(a[0]) * sp.value.x + double(a[1]) * sp.value.y + double(a[2]) * sp.value.z) / double(n);
+        }
+        for (size_t i = 0; i < vel.size(); ++i) {
+          if (w[i] == 0.0 || vel[i].is_constant()) continue;
+          std::vector<double> adj;
+          ad::Tape::current().backward(vel[i].idx, w[i], adj);
+          if (!finite_adjoints(adj, in)) continue;
+          std::vector<double>& g = grads.local();
+          for (const auto& [node, slot] : in.nodes) g[slot] += adj[node];
+        }
+      });
+    }
     ad::Tape::current().clear();
     finish_heightfield(stats, start, uint64_t(W) * H * spp, rays, invalid, scene, spp, opt, *hfe, hf_counters);
     return grads.reduce();

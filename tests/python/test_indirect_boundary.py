@@ -348,7 +348,8 @@ DOCUMENTED_DEFAULTS = {
     "octree_refine_factor": 1.0, "octree_grid_mix": 0.5, "octree_training": 512, "direction_mix": 0.2,
     "direction_resolution": 256, "direction_octaves": 2, "guide_refresh": 8, "guide_refresh_threshold": 0.02,
     "heightfield_mipmap": True, "heightfield_curvature_test": True, "heightfield_reparam": True,
-    "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True, "theta_subrange": 0.0,
+    "heightfield_interval_mix": 0.5, "heightfield_camera_every_interval": True, "heightfield_delta_edges": True,
+    "theta_subrange": 0.0,
     "shading_horizon": True, "max_depth": None, "boundary_parts": "both",
 }
 

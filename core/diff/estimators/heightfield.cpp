@@ -19,6 +19,8 @@ void HeightfieldCounters::add(const HeightfieldCounters& o) {
   other_shape_hits += o.other_shape_hits;
   delta_light_samples += o.delta_light_samples;
   empty_ranges += o.empty_ranges;
+  edge_samples += o.edge_samples;
+  edge_splats += o.edge_splats;
 }
 
 HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options,
@@ -30,11 +32,24 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
                                 std::to_string(options.interval_uniform_share) + ")");
   for (size_t i = 0; i < scene.shapes.size(); ++i) {
     const Shape& s = scene.shapes[i];
-    if (std::holds_alternative<Heightfield>(s.geometry)) {
-      if (m_shape >= 0)
-        throw std::invalid_argument(where + "the scene has more than one heightfield ('" + scene.shapes[m_shape].id + "', '" + s.id +
-                                    "'); one differentiable heightfield per scene is supported");
-      m_shape = int(i);
+    if (const auto* hf = std::get_if<Heightfield>(&s.geometry)) {
+      // Directions are global spherical coordinates around the first heightfield's up axis; a
+      // vertical slice of it is a vertical slice of every other field (and theta is the same in
+      // each local frame: similarities keep angles) only when their up axes are parallel.
+      const Vec3d up = glm::normalize(Vec3d(hf->world_from_local.vector(Vec3(0, 0, 1))));
+      if (m_shape >= 0) {
+        const Heightfield& first = std::get<Heightfield>(scene.shapes[m_shape].geometry);
+        const Vec3d up0 = glm::normalize(Vec3d(first.world_from_local.vector(Vec3(0, 0, 1))));
+        if (glm::dot(up, up0) < 1.0 - 1e-6)  // ~0.08 degrees: beyond float rounding of a rotation
+          throw std::invalid_argument(where + "heightfield '" + s.id + "' has its up axis (" + std::to_string(up.x) + ", " +
+                                      std::to_string(up.y) + ", " + std::to_string(up.z) + ") not along that of heightfield '" +
+                                      scene.shapes[m_shape].id + "' (" + std::to_string(up0.x) + ", " + std::to_string(up0.y) +
+                                      ", " + std::to_string(up0.z) + "); the estimator splits vertical slices, so all "
+                                      "heightfields of a scene must share their up direction (rotations about it are fine)");
+      } else {
+        m_shape = int(i);
+      }
+      m_shapes.push_back(int(i));
     }
     const Bsdf& b = scene.bsdfs[s.bsdf];
     if (b.is_delta() || b.transmits())
@@ -46,8 +61,8 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
   if (m_shape < 0) throw std::invalid_argument(where + "the scene has no heightfield");
   for (int si : params.moving_shapes()) {
     const Shape& s = scene.shapes[si];
-    if (si != m_shape && !(std::holds_alternative<Mesh>(s.geometry) && s.emitter >= 0))
-      throw std::invalid_argument(where + "shape '" + s.id + "' is differentiable; with a heightfield only its heights and "
+    if (!std::holds_alternative<Heightfield>(s.geometry) && !(std::holds_alternative<Mesh>(s.geometry) && s.emitter >= 0))
+      throw std::invalid_argument(where + "shape '" + s.id + "' is differentiable; with heightfields only their heights and "
                                   "area emitters (meshes) may move, because other shapes' silhouettes are not split");
   }
   for (size_t i = 0; i < scene.emitters.size(); ++i) {
@@ -66,6 +81,7 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
       m_area_emitters.push_back(std::move(t));
     } else if (std::holds_alternative<PointEmitter>(e.model) || std::holds_alternative<DirectionalEmitter>(e.model)) {
       m_delta_emitters.push_back(int(i));
+      if (std::holds_alternative<PointEmitter>(e.model)) m_point_lights.push_back(int(i));
     }
   }
 }
@@ -117,10 +133,11 @@ IntervalChoice choose_interval(const std::vector<Cut>& cut, double share, double
 // (uniform phi over the hull: 124-130 plus single samples of 100x the pixel's mean).
 constexpr double kAzimuthUniformShare = 0.1;
 
-// The origin of a slice, in the heightfield's local frame.
+// The origin of a slice, in the first heightfield's local frame, and in the world.
 struct Origin {
   VV p;          // taped
   Vec3d p0;      // primal
+  VV world;      // taped
 };
 
 }  // namespace
@@ -131,11 +148,19 @@ struct HeightfieldPath {
   PathInputs& in;
   HeightfieldCounters& cnt;
   Pcg32& rng;
-  DiffHeightfieldFrame F;
+  std::vector<DiffHeightfieldFrame> frames;  // one per heightfield, E.m_shapes' order
+  const DiffHeightfieldFrame& F;             // the first: its local frame holds (phi, theta)
   Replay R;
 
+  static std::vector<DiffHeightfieldFrame> make_frames(const HeightfieldEstimator& e, PathInputs& inputs) {
+    std::vector<DiffHeightfieldFrame> f;
+    f.reserve(e.m_shapes.size());
+    for (int s : e.m_shapes) f.emplace_back(e.m_scene, e.m_params, inputs, s);
+    return f;
+  }
+
   HeightfieldPath(const HeightfieldEstimator& e, PathInputs& inputs, HeightfieldCounters& counters, Pcg32& r)
-      : E(e), scene(e.m_scene), in(inputs), cnt(counters), rng(r), F(e.m_scene, e.m_params, inputs, e.m_shape),
+      : E(e), scene(e.m_scene), in(inputs), cnt(counters), rng(r), frames(make_frames(e, inputs)), F(frames[0]),
         R{e.m_scene, e.m_params, inputs} {}
 
   const Heightfield& hf() const { return F.hf; }
@@ -144,6 +169,7 @@ struct HeightfieldPath {
     Origin o;
     o.p = F.to_local_point(p_world);
     o.p0 = Vec3d(o.p.x.v, o.p.y.v, o.p.z.v);
+    o.world = p_world;
     return o;
   }
 
@@ -200,6 +226,16 @@ struct HeightfieldPath {
     return true;
   }
 
+  // Horizontal distance from og along (dx, dy) to the footprint edge that the primal border point
+  // at distance t0 lies on (the nearer of the x and y edges).
+  static Var border_t(const Heightfield& hf, const VV& og, const Var& dx, const Var& dy, double t0) {
+    const double x = og.x.v + dx.v * t0, y = og.y.v + dy.v * t0;
+    const double ex = std::abs(std::abs(x) - 0.5 * hf.width), ey = std::abs(std::abs(y) - 0.5 * hf.depth);
+    if (ex <= ey && std::abs(dx.v) > 1e-12) return (Var(std::copysign(0.5 * hf.width, x)) - og.x) / dx;
+    if (std::abs(dy.v) > 1e-12) return (Var(std::copysign(0.5 * hf.depth, y)) - og.y) / dy;
+    return Var(t0);  // a slice along the edge itself: measure zero
+  }
+
   // Samples theta in [lo, hi] for the slice at azimuth phi (Eq. 10-11): split at the peaks (and at
   // every emitter edge), choose one interval (choose_interval) and map linearly between its
   // taped end points. weight = 1 / pdf(theta) with the end points' motion in it.
@@ -221,24 +257,40 @@ struct HeightfieldPath {
       hi = b;
       inv_p = n;
     }
-    // Peaks with theta in (lo, hi): slopes in (cot hi, cot lo).
-    const glm::dvec2 d(std::cos(phi.v), std::sin(phi.v));
-    ++cnt.searches;
-    bool blocked = false;
-    const std::vector<SlicePeak> peaks =
-        find_peaks(hf(), o.p0, d, slope_of(hi.v), slope_of(lo.v), E.m_opt.search, &cnt.search, &blocked);
-    if (visible_only && blocked) return false;
-    const Var dx = cos(phi), dy = sin(phi);
+    // Peaks with theta in (lo, hi): slopes in (cot hi, cot lo), in every heightfield's slice at
+    // phi (each in its own local frame; theta is the same there, the up axes being parallel).
     std::vector<Split> splits;
-    for (const SlicePeak& p : peaks) {
-      // The peak at fixed horizontal distance: k is stationary in t there (Eq. 12), so its
-      // derivative is the partial at fixed t. Border points are fixed in t by the footprint.
-      Var z, zx, zy;
-      F.height(in, o.p.x + dx * Var(p.t), o.p.y + dy * Var(p.t), z, zx, zy);
-      const Var th = atan2(Var(p.t), z - o.p.z);
-      splits.push_back({th.v, th});
+    Split steepest{1e30, Var(0.0)};  // the smallest theta of a field's steepest peak
+    for (size_t f = 0; f < frames.size(); ++f) {
+      const DiffHeightfieldFrame& G = frames[f];
+      const VV og = f == 0 ? o.p : G.to_local_point(o.world);
+      Var dx = cos(phi), dy = sin(phi);
+      if (f > 0) {  // the horizontal direction at phi in this field's frame (a rotation about up, or a mirror)
+        const VV h = G.to_local_vector(F.to_world_vector(VV(dx, dy, Var(0.0))));
+        const Var n = sqrt(h.x * h.x + h.y * h.y);
+        dx = h.x / n;
+        dy = h.y / n;
+      }
+      ++cnt.searches;
+      bool blocked = false;
+      const std::vector<SlicePeak> peaks = find_peaks(G.hf, Vec3d(og.x.v, og.y.v, og.z.v), glm::dvec2(dx.v, dy.v), slope_of(hi.v),
+                                                      slope_of(lo.v), E.m_opt.search, &cnt.search, &blocked);
+      if (visible_only && blocked) return false;
+      for (const SlicePeak& p : peaks) {
+        // The peak at fixed horizontal distance: k is stationary in t there (Eq. 12), so its
+        // derivative is the partial at fixed t. A border point stays on its footprint edge, so
+        // its t follows the origin (which moves in this frame with the vertex, or when the field
+        // itself is translated).
+        const Var t = p.border ? border_t(G.hf, og, dx, dy, p.t) : Var(p.t);
+        Var z, zx, zy;
+        G.height(in, og.x + dx * t, og.y + dy * t, z, zx, zy);
+        const Var th = atan2(t, z - og.z);
+        splits.push_back({th.v, th});
+      }
+      // The last peak is this field's steepest: every direction below it meets this field.
+      if (!peaks.empty() && splits.back().v < steepest.v) steepest = splits.back();
     }
-    if (visible_only && !splits.empty() && splits.back().v < hi.v) hi = splits.back().var;  // the steepest peak
+    if (visible_only && steepest.v < hi.v) hi = steepest.var;
     if (!(hi.v > lo.v)) return false;
     for (size_t k = 0; k < E.m_area_emitters.size(); ++k) crossings(o, phi, emitter_triangles(k), splits);
     // The intervals of (lo, hi), end points sorted by primal value; coinciding splits are merged
@@ -269,15 +321,15 @@ struct HeightfieldPath {
   // Continuation range of a surface vertex: above the tangent plane for the heightfield (below it
   // a reflective BSDF is zero and the surface hides everything), the whole sphere elsewhere.
   Var horizon(const DiffVertex& x, const SurfaceInteraction& si, const Var& phi) const {
-    if (si.shape != E.m_shape) return Var(kPiD);
-    const VV n = F.to_local_vector(x.ng);  // (-zx, -zy, 1) / norm, scaled by 1 / scale
+    if (!std::holds_alternative<Heightfield>(scene.shapes[si.shape].geometry)) return Var(kPiD);
+    const VV n = F.to_local_vector(x.ng);  // (-zx, -zy, 1) / norm, scaled by 1 / scale (any field: the up axes agree)
     const Var k0 = -(n.x * cos(phi) + n.y * sin(phi)) / n.z;
     return atan2(Var(1.0), k0);
   }
 
   void note_hit(const SurfaceInteraction& si) {
     const Shape& s = scene.shapes[si.shape];
-    if (si.shape != E.m_shape && s.emitter < 0) ++cnt.other_shape_hits;
+    if (!std::holds_alternative<Heightfield>(s.geometry) && s.emitter < 0) ++cnt.other_shape_hits;
   }
 
   // Area emitters through emitter-domain sampling (App. A.1).
@@ -431,6 +483,109 @@ struct HeightfieldPath {
     return L;
   }
 
+  // The camera's view of world point p0: the hit along the camera ray towards it.
+  bool camera_sees(const Vec3& eye, const Vec3& p0, int shape) {
+    const Vec3 dv = p0 - eye;
+    const float dist = glm::length(dv);
+    SurfaceInteraction si;
+    ++cnt.rays;
+    if (!scene.intersect(Ray{eye, dv / dist, 0.0f, dist * 1.001f}, si)) return false;
+    // 1e-3 of the distance: the hit is the same surface point up to the intersector's rounding.
+    return si.shape == shape && std::abs(si.t - dist) <= 1e-3f * dist;
+  }
+
+  // The direct light of point light `light` at the camera's hit at film point f: visible or not,
+  // and whether the camera sees `shape` there.
+  bool probe(const Vec2& f, int shape, const Vec3& light, bool& lit) {
+    SurfaceInteraction si;
+    ++cnt.rays;
+    if (!scene.intersect(scene.camera.generate_ray(f), si) || si.shape != shape) return false;
+    ++cnt.rays;
+    lit = !scene.occluded(spawn_ray_to(si, light));
+    return true;
+  }
+
+  bool delta_edges(std::vector<HeightfieldSplat>& splats, std::vector<Var>& vel) {
+    const size_t K = E.m_point_lights.size(), NF = frames.size();
+    const int light = E.m_point_lights[std::min(K - 1, size_t(rng.next_float() * K))];
+    const DiffHeightfieldFrame& G = frames[std::min(NF - 1, size_t(rng.next_float() * NF))];
+    const PointEmitter& pt = std::get<PointEmitter>(scene.emitters[light].model);
+    const double phi0 = 2.0 * kPiD * double(rng.next_float());
+    const double inv_pdf = 2.0 * kPiD * double(K) * double(NF);
+    ++cnt.edge_samples;
+    const VV P = constant(pt.position);
+    const VV ol = G.to_local_point(P);
+    // phi is a tape input without a parameter slot: d(film)/d(phi) is read from its adjoint.
+    const Var phi = Var::input(phi0);
+    const Var dx = cos(phi), dy = sin(phi);
+    ++cnt.searches;
+    const std::vector<SlicePeak> peaks =
+        find_peaks(G.hf, Vec3d(ol.x.v, ol.y.v, ol.z.v), glm::dvec2(dx.v, dy.v), -1e30, 1e30, E.m_opt.search, &cnt.search);
+    const CameraView view(scene.camera);
+    const Vec3 eye = view.eye_world;
+    bool any = false;
+    for (const SlicePeak& p : peaks) {
+      const Var t = p.border ? border_t(G.hf, ol, dx, dy, p.t) : Var(p.t);
+      Var z, zx, zy;
+      G.height(in, ol.x + dx * t, ol.y + dy * t, z, zx, zy);
+      const VV xb = G.to_world_point(VV(ol.x + dx * t, ol.y + dy * t, z));
+      const VV D = ad::normalize(xb - P);
+      const Vec3 D0(float(D.x.v), float(D.y.v), float(D.z.v));
+      const float tb = float(ad::length(xb - P).v);
+      // The ray beyond the grazing point. It runs within a second-order distance of the surface
+      // there, and the intersector's near-tangent test reports the grazing point itself as a hit:
+      // starting 1e-4 of the distance beyond it lost 13 % of this term on the cone (FD's
+      // projection z -6.7). 1 % skips that; a receiver closer behind the peak than 1 % of the
+      // light's distance is lost (docs/heightfields.md, Limits).
+      const Ray ray{pt.position, D0, tb * 1.01f, std::numeric_limits<float>::infinity()};
+      SurfaceInteraction si;
+      ++cnt.rays;
+      if (!scene.intersect(ray, si)) continue;
+      const DiffVertex y = R.ray_hit(P, D, si, ray);
+      const Vec3 y0(float(y.p.x.v), float(y.p.y.v), float(y.p.z.v));
+      if (!camera_sees(eye, y0, si.shape)) continue;
+      const auto pc = view.proj.to_camera(y.p);
+      if (!(pc.z.v > view.proj.near)) continue;
+      Var fx, fy;
+      view.proj.film(pc, fx, fy);
+      // The edge's film tangent ds/dphi.
+      std::vector<double> adj;
+      ad::Tape::current().backward(fx.idx, 1.0, adj);
+      const double tx = phi.idx < int(adj.size()) ? adj[phi.idx] : 0.0;
+      ad::Tape::current().backward(fy.idx, 1.0, adj);
+      const double ty = phi.idx < int(adj.size()) ? adj[phi.idx] : 0.0;
+      const double len = std::sqrt(tx * tx + ty * ty);
+      if (!(len > 0.0) || !std::isfinite(len)) continue;
+      const glm::dvec2 n(-ty / len, tx / len);
+      // Probes 1e-3 pixels either side (as the primary term's): which side the light reaches.
+      const double delta = 1e-3;  // 1e-2 and 5e-2 gave the same term (sums within 2.5 %)
+      bool lit_minus = false, lit_plus = false;
+      if (!probe(Vec2(float(fx.v - delta * n.x), float(fy.v - delta * n.y)), si.shape, pt.position, lit_minus) ||
+          !probe(Vec2(float(fx.v + delta * n.x), float(fy.v + delta * n.y)), si.shape, pt.position, lit_plus) || lit_minus == lit_plus)
+        continue;
+      // The point light's direct contribution at y towards the camera (primal).
+      const VV to_light = P - y.p;
+      const Var d2 = dot(to_light, to_light);
+      const VV wl = to_light / sqrt(d2), we = ad::normalize(constant(eye) - y.p);
+      const VV f = R.bsdf_eval(scene.shapes[si.shape].bsdf, y, we, wl) * R.emitter_value(light, pt.intensity) / d2 *
+                   R.point_falloff(pt, wl);
+      const double sign = lit_minus ? 1.0 : -1.0;  // f(s - delta n) - f(s + delta n)
+      const double w = sign * len * inv_pdf;
+      const Spectrum value(float(f.x.v * w), float(f.y.v * w), float(f.z.v * w));
+      const Var v = fx * Var(n.x) + fy * Var(n.y);
+      bool splatted = false;
+      scene.camera.splat(fx.v, fy.v, [&](int pixel, float wt) {
+        splats.push_back({pixel, value * wt, int(vel.size())});
+        splatted = true;
+      });
+      if (!splatted) continue;
+      vel.push_back(v);
+      ++cnt.edge_splats;
+      any = true;
+    }
+    return any;
+  }
+
   // Pixel (px, py) with a box filter: the pixel's cone turned into (phi, theta-range) (App. A.1).
   VV pixel(int px, int py) {
     if (E.m_max_depth == 0) return VV();
@@ -523,6 +678,13 @@ ad::V3<ad::Var> HeightfieldEstimator::pixel(int x, int y, Pcg32& rng, PathInputs
   return path.pixel(x, y);
 }
 
+bool HeightfieldEstimator::delta_edge_sample(Pcg32& rng, PathInputs& in, std::vector<HeightfieldSplat>& splats,
+                                             std::vector<ad::Var>& velocity, HeightfieldCounters& counters) const {
+  if (!has_delta_edges()) return false;
+  HeightfieldPath path(*this, in, counters, rng);
+  return path.delta_edges(splats, velocity);
+}
+
 std::unique_ptr<HeightfieldEstimator> heightfield_estimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options,
                                                             int max_depth, int spp) {
   if (!params.any_geometry()) return nullptr;
@@ -540,10 +702,13 @@ std::unique_ptr<HeightfieldEstimator> heightfield_estimator(const Scene& scene, 
 
 std::vector<std::string> HeightfieldEstimator::summary(int spp, const HeightfieldCounters& c) const {
   std::vector<std::string> s;
-  const Shape& shape = m_scene.shapes[m_shape];
-  const Heightfield& hf = std::get<Heightfield>(shape.geometry);
-  s.push_back("heightfield estimator (Tong et al. 2023) for '" + shape.id + "' (" + std::to_string(hf.nx) + " x " +
-              std::to_string(hf.ny) + " heights): " + std::to_string(spp) +
+  std::string fields;
+  for (int i : m_shapes) {
+    const Shape& shape = m_scene.shapes[i];
+    const Heightfield& hf = std::get<Heightfield>(shape.geometry);
+    fields += (fields.empty() ? "'" : ", '") + shape.id + "' (" + std::to_string(hf.nx) + " x " + std::to_string(hf.ny) + " heights)";
+  }
+  s.push_back("heightfield estimator (Tong et al. 2023) for " + fields + ": " + std::to_string(spp) +
               " paths per pixel, theta reparameterised at the discontinuities of each azimuth slice; " +
               std::to_string(c.searches) + " peak searches visited " + std::to_string(c.search.nodes) + " mipmap nodes and " +
               std::to_string(c.search.cells) + " cells" +
@@ -555,9 +720,14 @@ std::vector<std::string> HeightfieldEstimator::summary(int spp, const Heightfiel
                    ? ", theta searched in sub-ranges of " + std::to_string(m_opt.theta_subrange_degrees) + " degrees (App. C)"
                    : std::string()));
   s.push_back("primary visibility and indirect boundary terms: not needed (the heightfield estimator reparameterises them)");
+  if (c.edge_samples)
+    s.push_back("point-light shadow edges cast by heightfields: " + std::to_string(c.edge_samples) + " samples, " +
+                std::to_string(c.edge_splats) + " reached the film");
   if (c.delta_light_samples)
-    s.push_back("point/directional lights: " + std::to_string(c.delta_light_samples) +
-                " shadow rays; their shadow edges are not differentiated (use area emitters for shadow derivatives)");
+    s.push_back("point/directional lights: " + std::to_string(c.delta_light_samples) + " shadow rays; " +
+                (has_delta_edges() ? std::string("not differentiated: directional lights' shadow edges and other occluders' "
+                                                 "shadow edges on a heightfield")
+                                   : std::string("their shadow edges are not differentiated (use area emitters for shadow derivatives)")));
   if (c.other_shape_hits)
     s.push_back("warning: " + std::to_string(c.other_shape_hits) +
                 " rays met shapes other than the heightfield and emitters, whose silhouettes are not split: derivatives may be "

@@ -12,12 +12,15 @@
 //
 // Strategies per vertex (a partition, no MIS, so the derivative of each stays unbiased):
 //   * area emitters only through emitter-domain sampling (App. A.1), one emitter chosen uniformly;
-//   * point and directional lights by a shadow ray (their shadow edges are NOT differentiated:
-//     counted in delta_light_samples and named in the summary);
+//   * point and directional lights by a shadow ray; point lights' shadow edges cast by the
+//     heightfields by a boundary term splatted to the film (delta_edge_sample); directional lights'
+//     and other occluders' shadow edges are NOT differentiated (named in the summary);
 //   * everything else by uniform phi and theta over the continuation range (App. A.2), which
 //     ignores area-emitter emission; escaping rays pick up infinite emitters.
-// The camera ray is the pixel domain in the same coordinates (App. A.1). Discontinuities caused by
-// other occluders than the heightfield and emitters (meshes and spheres without emission) are not
+// The camera ray is the pixel domain in the same coordinates (App. A.1). Several heightfields may
+// share a scene when their up axes are parallel: the coordinates are the first one's, and every
+// slice is split at each field's peaks (docs/heightfields.md). Discontinuities caused by
+// other occluders than heightfields and emitters (meshes and spheres without emission) are not
 // split; rays that hit them are counted (other_shape_hits), since they can bias the estimate.
 #pragma once
 #include <memory>
@@ -44,6 +47,15 @@ struct HeightfieldOptions {
   // choosing one (Eq. 6). Only pixels holding a split cost more (a path per interval); on the cone
   // the summed per-pixel variance fell 7.7-8x at the same time per call, on the terrain it is the same.
   bool camera_every_interval = true;
+  // The boundary term of point lights' shadow edges cast by heightfields (delta_edge_sample).
+  bool delta_edges = true;
+};
+
+// One film splat of a boundary sample: value times the derivative of velocity[velocity].
+struct HeightfieldSplat {
+  int pixel;
+  Spectrum value;
+  int velocity;
 };
 
 struct HeightfieldCounters {
@@ -53,20 +65,33 @@ struct HeightfieldCounters {
   uint64_t other_shape_hits = 0;    // rays that met an occluder whose edges are not split
   uint64_t delta_light_samples = 0; // shadow rays to point / directional lights (edges not differentiated)
   uint64_t empty_ranges = 0;        // pixel or emitter samples whose theta-range was empty (value 0)
+  uint64_t edge_samples = 0;        // point-light shadow edge samples (delta_edge_sample)
+  uint64_t edge_splats = 0;         // ... that reached the film
   void add(const HeightfieldCounters& o);
 };
 
 class HeightfieldEstimator {
  public:
   // Throws std::invalid_argument (naming the scene and object) for scenes the estimator cannot
-  // treat: more than one heightfield, delta or transmissive BSDFs, moving shapes other than the
-  // heightfield and area emitters, sphere emitters.
+  // treat: heightfields whose up axes differ, delta or transmissive BSDFs, moving shapes other than
+  // heightfields and area emitters, sphere emitters.
   HeightfieldEstimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options, int max_depth);
 
   // One sample of pixel (x, y) (box filter) as taped RGB.
   ad::V3<ad::Var> pixel(int x, int y, Pcg32& rng, PathInputs& in, HeightfieldCounters& counters) const;
 
   int heightfield_shape() const { return m_shape; }
+
+  // Point lights' shadow edges cast by the heightfields: a boundary term splatted to the film,
+  // since those edges are not split points of the slices the estimator samples. One sample: a
+  // point light, a field, an azimuth phi around the light (uniform); every peak of that slice
+  // seen from the light is a grazing ray (Eq. 12: its slope's derivative is the partial at fixed
+  // t); the ray continues to the receiver y, seen directly by the camera. Adds to the film point
+  // of y: (f(s - delta n) - f(s + delta n)) |ds/dphi| / pdf times d(s . n), n the film normal of
+  // the edge. Values are per sample (the caller divides by the count). False: nothing added.
+  bool delta_edge_sample(Pcg32& rng, PathInputs& in, std::vector<HeightfieldSplat>& splats, std::vector<ad::Var>& velocity,
+                         HeightfieldCounters& counters) const;
+  bool has_delta_edges() const { return m_opt.delta_edges && m_opt.reparameterize && !m_point_lights.empty(); }
   // What the estimator computed and left out, for DiffStats::summary.
   std::vector<std::string> summary(int spp, const HeightfieldCounters& counters) const;
 
@@ -79,9 +104,11 @@ class HeightfieldEstimator {
   const DiffParams& m_params;
   HeightfieldOptions m_opt;
   int m_max_depth;
-  int m_shape = -1;
+  int m_shape = -1;             // the first heightfield: its local frame holds the spherical coordinates
+  std::vector<int> m_shapes;    // every heightfield (m_shape first); all share the up axis
   std::vector<EmitterTriangles> m_area_emitters;
   std::vector<int> m_delta_emitters;
+  std::vector<int> m_point_lights;
 
   friend struct HeightfieldPath;
 };
