@@ -17,12 +17,13 @@ using VV = ad::V3<Var>;
 // camera sub-paths are not traced (a truncation, said in docs/derivatives.md).
 constexpr int kImportanceBounces = 4;
 
-// f * W_conn of the camera connection at observing vertex si, for light arriving from direction
-// w_light (unit, pointing away from si): its film position and value, false if none.
-bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const SurfaceInteraction& si, const Vec3& w_light,
-                       glm::dvec2& film, Spectrum& value, uint64_t& rays) {
-  const Vec3 eye = scene.camera.world_from_camera.point(Vec3(0.0f));
-  Vec3 wc = eye - si.p;
+// f * d(film)/dA of a connection from observing vertex si to a pinhole at `eye` seen through
+// `proj` (the camera, or a mirror chain's virtual camera), for light arriving from direction
+// w_light (unit, pointing away from si): its film position and value; wc the unit direction to
+// the eye. No visibility test.
+bool pinhole_connection(const Scene& scene, const FilmProjection& proj, const Vec3& eye, const SurfaceInteraction& si, const Vec3& w_light,
+                        glm::dvec2& film, Spectrum& value, Vec3& wc) {
+  wc = eye - si.p;
   const float dist = glm::length(wc);
   if (!(dist > 0.0f)) return false;
   wc /= dist;
@@ -34,11 +35,19 @@ bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const Sur
   if (glm::dot(w_light, si.ng) * wo.z <= 0.0f || wo.z == 0.0f) return false;
   const Bsdf& bsdf = scene.bsdfs[scene.shapes[si.shape].bsdf];
   const Spectrum f = bsdf.eval(wi, wo, si.uv, glm::dot(wc, si.ng) > 0.0f) / std::abs(wo.z);  // f alone: the ray measure has the cosine
-  if (is_black(f)) return false;
-  rays++;
-  if (scene.occluded(spawn_ray_to(si, eye))) return false;
   value = f * float(area_to_film);
-  return true;
+  return !is_black(value);
+}
+
+// f * W_conn of the camera connection at observing vertex si (pinhole_connection with the camera
+// and its visibility).
+bool connect_to_camera(const Scene& scene, const FilmProjection& proj, const SurfaceInteraction& si, const Vec3& w_light,
+                       glm::dvec2& film, Spectrum& value, uint64_t& rays) {
+  const Vec3 eye = scene.camera.world_from_camera.point(Vec3(0.0f));
+  Vec3 wc;
+  if (!pinhole_connection(scene, proj, eye, si, w_light, film, value, wc)) return false;
+  rays++;
+  return !scene.occluded(spawn_ray_to(si, eye));
 }
 
 // The same through a refraction stack (core/diff/terms/delta_chains.h): f * T * d(film)/dA at si,
@@ -69,20 +78,11 @@ bool connect_through_stack(const Scene& scene, const RefractionStack& st, const 
 bool connect_through_mirrors(const Scene& scene, const MirrorChain& chain, const FilmProjection& proj, const Vec3& eye_virtual,
                              const SurfaceInteraction& si, const Vec3& w_light, glm::dvec2& film, Spectrum& value, Vec3& d_last,
                              uint64_t& rays) {
-  Vec3 wc = eye_virtual - si.p;
-  const float dist = glm::length(wc);
-  if (!(dist > 0.0f)) return false;
-  wc /= dist;
-  double area_to_film;
-  if (!proj.film_position(si.p, glm::dot(si.ng, wc), film, area_to_film) || !scene.camera.film_covers(film.x, film.y)) return false;
-  const Vec3 wi = si.frame.to_local(wc), wo = si.frame.to_local(w_light);
-  if (glm::dot(w_light, si.ng) * wo.z <= 0.0f || wo.z == 0.0f) return false;
-  const Bsdf& bsdf = scene.bsdfs[scene.shapes[si.shape].bsdf];
-  const Spectrum f = bsdf.eval(wi, wo, si.uv, glm::dot(wc, si.ng) > 0.0f) / std::abs(wo.z);
-  if (is_black(f)) return false;
+  Vec3 wc;
+  if (!pinhole_connection(scene, proj, eye_virtual, si, w_light, film, value, wc)) return false;
   Spectrum R;
   if (!connect_through_mirrors(scene, chain, eye_virtual, si, R, rays)) return false;
-  value = f * R * float(area_to_film);
+  value *= R;
   d_last = -wc;
   return is_finite(value);
 }
