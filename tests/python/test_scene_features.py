@@ -387,14 +387,19 @@ def test_disk_emitter_known_answers():
     img = scene.render(seed=1)
     expected = 0.5 / math.pi * math.pi * L * R * R / (h * h + R * R)
     assert img[3:5, 3:5].mean() == pytest.approx(expected, rel=0.01)
+    head_on, ppu = disk_head_on()
+    assert head_on.render(seed=2)[..., 0].sum() == pytest.approx(2.0 * math.pi * (0.7 * ppu) ** 2, rel=2e-3)
+
+
+def disk_head_on():
+    """An emitting disk of radius 0.7 and radiance 2 seen head-on, and the film's pixels per unit
+    length at its distance."""
     W, fov, Dd = 32, 30.0, 4.0
     head_on = limn.load_dict({"type": "scene", "integrator": {"type": "path", "max_depth": 1},
                               "sensor": camera((0, -Dd, 0), (0, 0, 0), fov=fov, width=W, height=W, spp=256),
                               "obj": {"type": "disk", "to_world": [{"scale": 0.7}, {"rotate": {"axis": [1, 0, 0], "angle": 90}}],
                                       "emitter": {"type": "area", "radiance": 2.0}}})
-    ppu = W / (2 * math.tan(math.radians(fov) / 2)) / Dd
-    assert head_on.render(seed=2)[..., 0].sum() == pytest.approx(2.0 * math.pi * (0.7 * ppu) ** 2, rel=2e-3)
-    return head_on, ppu
+    return head_on, W / (2 * math.tan(math.radians(fov) / 2)) / Dd
 
 
 def test_disk_lamp_derivatives_match_fd():
@@ -425,7 +430,7 @@ def test_disk_lamp_derivatives_match_fd():
 
 def test_disk_rim_matches_the_analytic_derivative():
     """The rim is the primary term's silhouette: d(image sum)/dR = L 2 pi R (pixels per unit)^2."""
-    head_on, ppu = test_disk_emitter_known_answers()
+    head_on, ppu = disk_head_on()
     head_on.set_differentiable(["obj.radius"])
     f = quiet(head_on.render_forward, {"obj.radius": np.float32(1.0)}, spp_interior=4, spp_primary=16, seed=0)
     assert f[..., 0].sum() == pytest.approx(2.0 * 2 * math.pi * 0.7 * ppu ** 2, rel=1e-4)
