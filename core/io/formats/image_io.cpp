@@ -2,6 +2,7 @@
 
 #include <OpenImageIO/imageio.h>
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -66,6 +67,34 @@ std::string check_png_chunks(const std::string& path, uint64_t file_size) {
     if (std::memcmp(c + 4, "IDAT", 4) == 0 || std::memcmp(c + 4, "IEND", 4) == 0) return "";  // image data: read by rows
     at += 12 + length;
   }
+  return "";
+}
+
+// OpenImageIO's BMP reader decodes an RLE image whole when the file is opened, into a buffer of
+// width x height from the header, before limn sees the image size: the header is read here first.
+// Returns an error, or "" when the size is within the limits and what the file can hold.
+std::string check_bmp_header(const std::string& path, uint64_t file_size) {
+  unsigned char h[30] = {};
+  std::ifstream f(path, std::ios::binary);
+  f.read(reinterpret_cast<char*>(h), sizeof h);
+  if (f.gcount() < 26) return "truncated BMP header";
+  auto u16 = [&](int at) { return uint32_t(h[at]) | (uint32_t(h[at + 1]) << 8); };
+  auto u32 = [&](int at) { return u16(at) | (u16(at + 2) << 16); };
+  const uint32_t dib = u32(14);
+  uint64_t w, hgt, bits;
+  if (dib == 12) {  // BITMAPCOREHEADER: 16-bit sizes
+    w = u16(18), hgt = u16(20), bits = u16(24);
+  } else {
+    if (f.gcount() < 30) return "truncated BMP header";
+    w = uint64_t(std::abs(int64_t(int32_t(u32(18))))), hgt = uint64_t(std::abs(int64_t(int32_t(u32(22))))), bits = u16(28);
+  }
+  if (w == 0 || hgt == 0) return "empty BMP (" + std::to_string(w) + " x " + std::to_string(hgt) + " pixels)";
+  if (w * hgt > kMaxImagePixels)
+    return std::to_string(w) + " x " + std::to_string(hgt) + " pixels, more than the limit of " + std::to_string(kMaxImagePixels);
+  const uint64_t bytes = w * hgt * std::max<uint64_t>(bits / 8, 1);
+  if (bytes > kMaxImageExpansion * file_size + (uint64_t(1) << 20))
+    return std::to_string(w) + " x " + std::to_string(hgt) + " pixels, more than a file of " + std::to_string(file_size) +
+           " bytes can hold (corrupt header?)";
   return "";
 }
 
@@ -208,6 +237,7 @@ Bitmap read_image(const std::string& path, bool raw) {
   // Checks of the headers whose sizes the libraries allocate by before limn sees the image size.
   const std::string problem = std::strcmp(format, "openexr") == 0 ? check_exr_header(path, size)
                               : std::strcmp(format, "png") == 0   ? check_png_chunks(path, size)
+                              : std::strcmp(format, "bmp") == 0   ? check_bmp_header(path, size)
                                                                   : std::string();
   if (!problem.empty()) throw std::invalid_argument("cannot read image '" + name + "' (" + format + "): " + problem);
   // OpenImageIO's plugins report problems through their error state, but the libraries under them
