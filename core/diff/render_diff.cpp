@@ -194,6 +194,23 @@ ad::V3<ad::Var> camera_path(const Scene& scene, const DiffParams& params, const 
   return L;
 }
 
+// Point lights' shadow edges cast by heightfields: calls visit(in, splats, velocities, n) for each
+// of the call's n edge samples that reached the film (forward splats, backward scatters).
+template <typename Visit>
+void for_each_heightfield_edge(const Scene& scene, const DiffOptions& opt, int spp, const HeightfieldEstimator& e,
+                               tbb::enumerable_thread_specific<HeightfieldCounters>& hf_counters, std::atomic<uint64_t>& rays, Visit visit) {
+  const uint64_t n = samples_for(scene, opt.spp_boundary > 0 ? opt.spp_boundary : spp);
+  for_each_boundary_sample(n, kHeightfieldEdgeTag, opt, [&](uint64_t, Pcg32& rng, PathInputs& in) {
+    std::vector<HeightfieldSplat> splats;
+    std::vector<ad::Var> vel;
+    HeightfieldCounters& c = hf_counters.local();
+    const uint64_t before = c.rays;
+    const bool ok = e.delta_edge_sample(rng, in, splats, vel, c);
+    rays += c.rays - before;
+    if (ok) visit(in, splats, vel, n);
+  });
+}
+
 void finish_heightfield(DiffStats* stats, std::chrono::steady_clock::time_point start, uint64_t paths, const std::atomic<uint64_t>& rays,
                         const std::atomic<uint64_t>& invalid, const Scene& scene, int spp, const DiffOptions& opt,
                         const HeightfieldEstimator& e, tbb::enumerable_thread_specific<HeightfieldCounters>& hf_counters) {
@@ -315,15 +332,8 @@ Image forward(const Scene& scene, const DiffParams& params, const std::vector<do
   if (hfe) {
     if (hfe->has_delta_edges()) {  // point lights' shadow edges cast by heightfields, splatted
       ThreadSums images(size_t(W) * H * 3);
-      const uint64_t n = samples_for(scene, opt.spp_boundary > 0 ? opt.spp_boundary : spp);
-      for_each_boundary_sample(n, kHeightfieldEdgeTag, opt, [&](uint64_t, Pcg32& rng, PathInputs& in) {
-        std::vector<HeightfieldSplat> splats;
-        std::vector<ad::Var> vel;
-        HeightfieldCounters& c = hf_counters.local();
-        const uint64_t before = c.rays;
-        const bool ok = hfe->delta_edge_sample(rng, in, splats, vel, c);
-        rays += c.rays - before;
-        if (!ok) return;
+      for_each_heightfield_edge(scene, opt, spp, *hfe, hf_counters, rays, [&](PathInputs& in, const std::vector<HeightfieldSplat>& splats,
+                                                                             const std::vector<ad::Var>& vel, uint64_t n) {
         std::vector<double> adj, d(vel.size(), 0.0);
         for (size_t i = 0; i < vel.size(); ++i) d[i] = vel[i].is_constant() ? 0.0 : directional(vel[i], in, tangent, adj);
         std::vector<double>& im = images.local();
@@ -407,15 +417,8 @@ std::vector<double> backward(const Scene& scene, const DiffParams& params, const
   });
   if (hfe) {
     if (hfe->has_delta_edges()) {  // point lights' shadow edges cast by heightfields, splatted
-      const uint64_t n = samples_for(scene, opt.spp_boundary > 0 ? opt.spp_boundary : spp);
-      for_each_boundary_sample(n, kHeightfieldEdgeTag, opt, [&](uint64_t, Pcg32& rng, PathInputs& in) {
-        std::vector<HeightfieldSplat> splats;
-        std::vector<ad::Var> vel;
-        HeightfieldCounters& c = hf_counters.local();
-        const uint64_t before = c.rays;
-        const bool ok = hfe->delta_edge_sample(rng, in, splats, vel, c);
-        rays += c.rays - before;
-        if (!ok) return;
+      for_each_heightfield_edge(scene, opt, spp, *hfe, hf_counters, rays, [&](PathInputs& in, const std::vector<HeightfieldSplat>& splats,
+                                                                             const std::vector<ad::Var>& vel, uint64_t n) {
         std::vector<double> w(vel.size(), 0.0);
         for (const auto& sp : splats) {
           const float* a = &adjoint.rgb[3 * size_t(sp.pixel)];
