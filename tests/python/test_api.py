@@ -155,6 +155,28 @@ def test_image_round_trips(tmp_path):
         limn.write_image(tmp_path / "b.exr", np.zeros((4, 4, 2)))
 
 
+def test_tall_tiled_and_grey_images_read_whole(tmp_path):
+    # Scanline files are read 64 rows at a time (image_io.cpp): a height that is not a multiple of
+    # the block, a tiled file and a one-channel file must come back pixel for pixel.
+    import shutil
+    import subprocess
+    oiiotool = shutil.which("oiiotool")
+    assert oiiotool, "oiiotool (Debian's openimageio-tools, installed by bootstrap.sh) is missing"
+    h, w = 150, 5
+    img = np.zeros((h, w, 3), np.float32)
+    img[..., 0] = np.arange(h)[:, None] / h
+    img[..., 1] = np.arange(w)[None, :] / w
+    img[..., 2] = 0.25
+    limn.write_image(tmp_path / "a.exr", img)
+    subprocess.run([oiiotool, tmp_path / "a.exr", "--tile", "16", "16", "-o", tmp_path / "tiled.exr"], check=True)
+    subprocess.run([oiiotool, tmp_path / "a.exr", "--ch", "R", "-o", tmp_path / "grey.exr"], check=True)
+    subprocess.run([oiiotool, tmp_path / "a.exr", "-d", "float", "-o", tmp_path / "a.tif"], check=True)
+    np.testing.assert_array_equal(limn.read_image(tmp_path / "a.exr"), img)
+    np.testing.assert_array_equal(limn.read_image(tmp_path / "tiled.exr"), img)
+    np.testing.assert_array_equal(limn.read_image(tmp_path / "a.tif"), img)
+    np.testing.assert_array_equal(limn.read_image(tmp_path / "grey.exr"), np.repeat(img[..., :1], 3, axis=2))
+
+
 def test_bitmap_texture(tmp_path):
     tex = np.zeros((2, 2, 3), dtype=np.float32)
     tex[:, 0] = [1, 0, 0]  # left half red, right half blue

@@ -462,3 +462,7 @@ def test_images_truncated_empty_or_claiming_huge_sizes(tmp_path):
     limn.write_image(tmp_path / "b.exr", np.full((2, 3, 3), 0.25, np.float32))
     (tmp_path / "b.png").write_bytes((tmp_path / "b.exr").read_bytes())  # read by its content, not its name
     np.testing.assert_array_equal(limn.read_image(tmp_path / "b.png"), np.full((2, 3, 3), 0.25, np.float32))
+    # A TIFF whose strip sizes are broken (found by fuzz_heightfield; reading stops at the first bad block).
+    import pathlib
+    broken = pathlib.Path(__file__).parents[1] / "fuzz/corpus/heightfield/slow-tiff-broken-strip-sizes-a"
+    expect(lambda: limn.read_image(broken), "slow-tiff-broken-strip-sizes-a", "(tiff)", "StripByteCounts")
