@@ -12,11 +12,11 @@ views under a sun and a constant sky. The start: an ``sdfgrid`` sphere, 16^3, up
 to 31^3 after 60 iterations. Its grid values (``obj.data``) are optimised with limn's Adam
 (limn.optim.Adam) on the mean L2 image loss, with the derivatives limn computes for sdfgrid
 (interior + primary visibility + indirect boundary), the gradient smoothed by the Sobolev
-preconditioner (I + lambda L)^-1 of Large Steps on the grid (:func:`smooth_gradient`), which is
+preconditioner (I + lambda L)^-1 of Large Steps on the grid (limn.sdf.smooth_gradient), which is
 the smoothness regulariser here.
 
-Redistancing (every ``k`` iterations) is a brute-force distance transform written here
-(:func:`redistance`): points on the zero set of the trilinear interpolant are found exactly on
+Redistancing (every ``k`` iterations) is a brute-force distance transform, limn.sdf.redistance:
+points on the zero set of the trilinear interpolant are found exactly on
 lines through the grid (along a line parallel to an axis the interpolant is linear inside each
 voxel, so each sign change between two samples of such a line is one exact root), and every grid
 value becomes the distance to the nearest of them with the old value's sign. Values of nodes next
@@ -43,6 +43,10 @@ import numpy as np
 import limn
 from limn import optim
 from limn.examples.multiview import chamfer, surface_points
+# The grid helpers live in the package (also used by the Blender add-on's SDF mode); imported here
+# under their old names, so `sdf_optimise.redistance` etc. keep working.
+from limn.sdf import (distance_field_error, gradient_norm, nearest, redistance, smooth_gradient,  # noqa: F401
+                      trilinear_gradient, upsample, zero_set)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BUNNY = os.path.join(ROOT, "scenes", "projective", "bunny.ply")
@@ -79,133 +83,7 @@ def sphere_grid(n: int, radius: float = 0.3) -> np.ndarray:
     return (np.sqrt((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) - radius).astype(np.float32)
 
 
-# ---- the zero set and the distance transform -------------------------------------------------------
-
-def _upsample(a: np.ndarray, axis: int, m: int) -> np.ndarray:
-    """Linear interpolation along ``axis`` at m - 1 extra points per interval (exact for a trilinear field)."""
-    n = a.shape[axis]
-    t = np.arange((n - 1) * m + 1) / m
-    i = np.minimum(t.astype(int), n - 2)
-    w = (t - i).reshape([-1 if k == axis else 1 for k in range(a.ndim)])
-    return np.take(a, i, axis) * (1 - w) + np.take(a, i + 1, axis) * w
-
-
-def zero_set(data: np.ndarray, m: int = 3) -> np.ndarray:
-    """Points (P, 3), local (x, y, z) in [0, 1]^3, on the zero set of the trilinear interpolant of
-    ``data`` ([z, y, x]): the exact roots on lines parallel to each axis, m lines per voxel and
-    direction of the other two axes (along such a line the interpolant is piecewise linear)."""
-    f = data.astype(np.float64)
-    size = np.array(f.shape[::-1], dtype=np.float64) - 1  # voxels along x, y, z
-    points = []
-    for axis in range(3):  # array axis: 0 = z, 1 = y, 2 = x
-        a = f
-        for other in range(3):
-            if other != axis:
-                a = _upsample(a, other, m)
-        a = np.moveaxis(a, axis, -1)
-        f0, f1 = a[..., :-1], a[..., 1:]
-        cross = (f0 < 0) != (f1 < 0)  # f < 0 is inside (docs/scene-format.md)
-        idx = np.nonzero(cross)
-        t = f0[idx] / (f0[idx] - f1[idx])  # the root of the linear piece
-        coords = [None, None, None]  # array-axis coordinates in samples
-        rest = [k for k in range(3) if k != axis]
-        coords[rest[0]] = idx[0] / m
-        coords[rest[1]] = idx[1] / m
-        coords[axis] = idx[2] + t
-        points.append(np.stack([coords[2], coords[1], coords[0]], axis=1) / size)
-    return np.concatenate(points) if points else np.zeros((0, 3))
-
-
-def trilinear_gradient(data: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Gradient (P, 3) of the trilinear interpolant of ``data`` at local points p (P, 3), per local unit."""
-    f = data.astype(np.float64)
-    size = np.array(f.shape[::-1], dtype=np.float64) - 1
-    q = np.clip(p * size, 0, size)
-    i = np.minimum(q.astype(int), (size - 1).astype(int))
-    u, v, w = (q - i).T
-    x, y, z = i.T
-    c = lambda dz, dy, dx: f[z + dz, y + dy, x + dx]
-    # d/du of sum_corners f * (u or 1-u)(v or 1-v)(w or 1-w), likewise v, w
-    gx = ((c(0, 0, 1) - c(0, 0, 0)) * (1 - v) * (1 - w) + (c(0, 1, 1) - c(0, 1, 0)) * v * (1 - w)
-          + (c(1, 0, 1) - c(1, 0, 0)) * (1 - v) * w + (c(1, 1, 1) - c(1, 1, 0)) * v * w)
-    gy = ((c(0, 1, 0) - c(0, 0, 0)) * (1 - u) * (1 - w) + (c(0, 1, 1) - c(0, 0, 1)) * u * (1 - w)
-          + (c(1, 1, 0) - c(1, 0, 0)) * (1 - u) * w + (c(1, 1, 1) - c(1, 0, 1)) * u * w)
-    gz = ((c(1, 0, 0) - c(0, 0, 0)) * (1 - u) * (1 - v) + (c(1, 0, 1) - c(0, 0, 1)) * u * (1 - v)
-          + (c(1, 1, 0) - c(0, 1, 0)) * (1 - u) * v + (c(1, 1, 1) - c(0, 1, 1)) * u * v)
-    return np.stack([gx, gy, gz], axis=1) * size
-
-
-def nearest(queries: np.ndarray, points: np.ndarray):
-    """Index of and distance to the nearest of ``points`` for every query (exact; brute force in
-    chunks, or scipy's k-d tree when scipy is installed)."""
-    try:
-        from scipy.spatial import cKDTree
-    except ImportError:
-        cKDTree = None
-    if cKDTree is not None:
-        d, j = cKDTree(points).query(queries)
-        return j, d
-    j = np.empty(len(queries), dtype=np.int64)
-    pp = (points * points).sum(axis=1)
-    for s in range(0, len(queries), 512):
-        q = queries[s:s + 512]
-        # |q - p|^2 = |q|^2 - 2 q.p + |p|^2; |q|^2 is the same for every p: left out of the argmin
-        j[s:s + 512] = (pp[None, :] - 2.0 * (q @ points.T)).argmin(axis=1)
-    return j, np.linalg.norm(queries - points[j], axis=1)
-
-
-def redistance(data: np.ndarray, m: int = 3) -> np.ndarray:
-    """The signed distance (local units) from every grid corner to the zero set of the trilinear
-    interpolant of ``data``, with the sign of ``data`` (brute-force distance transform, module
-    docstring). Nodes with a sign change to a neighbour along an axis take the distance to the
-    tangent plane at their nearest zero-set point; the others the distance to that point.
-    A grid without a zero crossing is returned unchanged."""
-    f = data.astype(np.float64)
-    pts = zero_set(f, m)
-    if len(pts) == 0:
-        return data.copy()
-    nz, ny, nx = f.shape
-    z, y, x = np.meshgrid(np.linspace(0, 1, nz), np.linspace(0, 1, ny), np.linspace(0, 1, nx), indexing="ij")
-    nodes = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
-    j, dist = nearest(nodes, pts)
-    inside = f < 0
-    band = np.zeros_like(inside)
-    for axis in range(3):
-        change = np.diff(inside, axis=axis)
-        lo = [slice(None)] * 3
-        hi = [slice(None)] * 3
-        lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-        band[tuple(lo)] |= change
-        band[tuple(hi)] |= change
-    b = band.ravel()
-    g = trilinear_gradient(f, pts[j[b]])
-    norm = np.linalg.norm(g, axis=1)
-    ok = norm > 1e-12  # a flat spot: keep the point distance (no plane to measure to)
-    plane = np.abs(((nodes[b] - pts[j[b]]) * g).sum(axis=1)) / np.where(ok, norm, 1.0)
-    dist_b = dist[b]
-    dist_b[ok] = np.minimum(plane[ok], dist_b[ok])  # the plane distance never exceeds the point distance
-    dist[b] = dist_b
-    out = np.where(inside.ravel(), -dist, dist).reshape(f.shape)
-    return out.astype(data.dtype)
-
-
-def gradient_norm(data: np.ndarray) -> np.ndarray:
-    """|grad f| by central differences at the interior corners (local units), shaped (nz-2, ny-2, nx-2)."""
-    f = data.astype(np.float64)
-    h = [1.0 / (n - 1) for n in f.shape]
-    gz = (f[2:, 1:-1, 1:-1] - f[:-2, 1:-1, 1:-1]) / (2 * h[0])
-    gy = (f[1:-1, 2:, 1:-1] - f[1:-1, :-2, 1:-1]) / (2 * h[1])
-    gx = (f[1:-1, 1:-1, 2:] - f[1:-1, 1:-1, :-2]) / (2 * h[2])
-    return np.sqrt(gx * gx + gy * gy + gz * gz)
-
-
-def distance_field_error(data: np.ndarray) -> float:
-    """Median of | |grad f| - 1 | over the interior corners more than two voxels from the zero set
-    (by |f|), where central differences straddle no surface: 0 for a distance field."""
-    g = gradient_norm(data)
-    far = np.abs(data[1:-1, 1:-1, 1:-1]) > 2.0 / (data.shape[0] - 1)
-    return float(np.median(np.abs(g[far] - 1))) if far.any() else float("nan")
-
+# ---- the zero set and the distance transform: limn.sdf (zero_set, redistance, ...) ----------------
 
 def to_world(local: np.ndarray) -> np.ndarray:
     return local - 0.5  # TO_WORLD
@@ -218,20 +96,6 @@ def chamfer_error(data: np.ndarray, truth_points: np.ndarray, n: int = 3000, see
         return float("inf")
     pts = pts[np.random.default_rng(seed).choice(len(pts), size=min(n, len(pts)), replace=False)]
     return chamfer(to_world(pts), truth_points)
-
-
-def smooth_gradient(grad: np.ndarray, lambda_: float) -> np.ndarray:
-    """(I + lambda L)^-1 grad on the grid, L the 7-point Laplacian in voxel units: the Sobolev
-    preconditioner of Large Steps (Nicolet et al. 2021, Eq. 7) on grid values instead of vertices,
-    solved exactly by FFT. Periodic wrap-around at the grid's faces: the gradient is zero there
-    (the surface stays inside the cube), so the wrap only couples zeros. lambda 0: unchanged."""
-    if lambda_ <= 0:
-        return grad
-    eig = 0.0
-    for axis, n in enumerate(grad.shape):
-        k = 2.0 - 2.0 * np.cos(2.0 * np.pi * np.arange(n) / n)  # eigenvalues of the 1D periodic Laplacian
-        eig = eig + k.reshape([-1 if a == axis else 1 for a in range(grad.ndim)])
-    return np.real(np.fft.ifftn(np.fft.fftn(grad) / (1.0 + lambda_ * eig)))
 
 
 # ---- scenes ---------------------------------------------------------------------------------------
@@ -260,15 +124,6 @@ def targets(bunny, size: int, views: int, spp: int = 256):
 
 
 # ---- the optimisation -----------------------------------------------------------------------------
-
-def upsample(data: np.ndarray) -> np.ndarray:
-    """The same trilinear field on a grid with twice the voxels per axis (n -> 2n - 1 samples):
-    the old corners stay, the new ones are the interpolant's values (exact, the surface is unchanged)."""
-    a = data.astype(np.float64)
-    for axis in range(3):
-        a = _upsample(a, axis, 2)
-    return a.astype(data.dtype)
-
 
 def _sdf_scenes(grid, views, size):
     scenes = [limn.load_dict(view({"type": "sdfgrid", "data": grid.astype(np.float32), "to_world": TO_WORLD}, o, size))
