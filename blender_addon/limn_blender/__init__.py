@@ -67,6 +67,18 @@ class LimnSettings(bpy.types.PropertyGroup):
         name="SDF padding", default=0.1, min=0.0, max=10.0,
         description="SDF mode: room around the mesh inside the grid, as a share of its longest side (the shape cannot "
                     "grow beyond the grid)")
+    sdf_learning_rate: bpy.props.FloatProperty(
+        name="SDF learning rate", default=optimize_ops.sdf.LEARNING_RATE, min=1e-6, precision=3,
+        description="SDF mode: Adam's step size in voxels per iteration (the grid values move by about this many "
+                    "voxel sizes per step)")
+    sdf_smoothing: bpy.props.FloatProperty(
+        name="SDF smoothing", default=optimize_ops.sdf.SMOOTHING, min=0.0,
+        description="SDF mode: lambda (voxels squared) of the Sobolev preconditioner (I + lambda L)^-1 on the grid's "
+                    "gradient (Large Steps on a grid); 0: the raw gradient")
+    sdf_redistance_every: bpy.props.IntProperty(
+        name="Redistance every", default=optimize_ops.sdf.REDISTANCE_EVERY, min=0,
+        description="SDF mode: iterations between redistancings of the grid (a brute-force distance transform that "
+                    "keeps it a signed distance field); 0: never")
     mask_vertex_group: bpy.props.StringProperty(
         name="Mask group", description="Heightfield of a grid mesh: heights of vertices with zero weight (or outside "
                                        "the group) stay fixed")
@@ -116,8 +128,13 @@ class LIMN_PT_render(bpy.types.Panel):
             row.prop(t, "light_collection", text="", icon="LIGHT")  # empty: all lights
         box.operator(optimize_ops.LIMN_OT_target_add.bl_idname, icon="ADD")
         box.prop(s, "iterations")
-        box.prop(s, "learning_rate")
-        box.prop(s, "large_steps_lambda")
+        if s.optimize_mode == "SDF":  # its own step (voxels), smoothing and redistancing; no Large Steps
+            box.prop(s, "sdf_learning_rate")
+            box.prop(s, "sdf_smoothing")
+            box.prop(s, "sdf_redistance_every")
+        else:
+            box.prop(s, "learning_rate")
+            box.prop(s, "large_steps_lambda")
         running = optimize_ops._running_on(s)
         if running is not None:
             row = box.row()

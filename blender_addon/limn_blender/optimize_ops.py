@@ -23,7 +23,9 @@ objects marked as limn heightfields and for meshes with an image Displace modifi
 
 SDF mode (sdf.py) voxelises a closed mesh into a limn signed-distance grid (`sdf_resolution`
 samples along its longest side), optimises the grid's values and writes the result back into the
-mesh by marching cubes (its vertices and faces are replaced; one undo step restores them).
+mesh by marching cubes (its vertices and faces are replaced; one undo step restores them). Its
+learning rate is in voxels per iteration (default sdf.LEARNING_RATE), the gradient is smoothed
+(`sdf_smoothing`, voxels^2) and the grid redistanced every `sdf_redistance_every` iterations.
     limn_blender.optimize(obj, [(camera, image), ...], mode="SDF", sdf_resolution=32)
 
 Curve mode optimises the control points and radii of a curve object's limn fibre curves
@@ -149,7 +151,8 @@ class Problem:
     thread; SDF mode voxelises there) must run before the views are used."""
 
     def __init__(self, obj, targets, spp: int, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None,
-                 sdf_resolution: int = 32, sdf_padding: float = 0.1):
+                 sdf_resolution: int = 32, sdf_padding: float = 0.1, sdf_smoothing: float = sdf.SMOOTHING,
+                 sdf_redistance_every: int = sdf.REDISTANCE_EVERY):
         if obj is None or obj.type not in ("MESH", *CURVE_TYPES):
             raise ValueError("choose a mesh, curve or hair curves object to optimise")
         if not targets:
@@ -180,7 +183,8 @@ class Problem:
         self.source = heightfield.Source(obj) if self.mode == "HEIGHTFIELD" else None
         self.mask = self.source.mask(mask_vertex_group, mask_image) if self.source else None
         # SDF: the world-space triangles now; voxelised in prepare() (on the worker thread).
-        self.sdf = sdf.SdfSource(obj, sdf_resolution, sdf_padding) if self.mode == "SDF" else None
+        self.sdf = sdf.SdfSource(obj, sdf_resolution, sdf_padding, sdf_smoothing, sdf_redistance_every) \
+            if self.mode == "SDF" else None
         self.prepare_fraction = 0.0
         scene = bpy.context.scene
         saved_camera = scene.camera
@@ -216,7 +220,9 @@ class Problem:
         if self.sdf is not None:
             self.name = f"{obj.name}.data"
             self._shape_id = obj.name  # prepare() runs on the worker thread and must not read bpy
-            self.faces = None  # no Large Steps on a grid
+            self.faces = None  # no Large Steps on a mesh: the grid's own smoothing is the gradient hook
+            self.gradient = lambda g: self.sdf.gradient(self.limn, g)
+            self.project = lambda x: self.sdf.project(self.limn, x)
             self._refs = self._make_refs()
             return
         if self.source is not None:
@@ -261,6 +267,10 @@ class Problem:
             desc[self._shape_id] = self.sdf.shape(desc[self._shape_id])
             self.views.append((self.limn.load_dict(desc, source=source), pixels))
         self._pending = []
+
+    def step_size(self, lr: float) -> float:
+        """The optimiser's learning rate: SDF mode takes lr in voxels per iteration (after prepare())."""
+        return self.sdf.step_size(lr) if self.sdf is not None else lr
 
     @staticmethod
     def _check_curve_object(obj) -> None:
@@ -364,15 +374,20 @@ class Problem:
         self.obj.data.update()
 
 
-def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01, lambda_: float = 20.0,
+def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float | None = None, lambda_: float = 20.0,
              progress=None, mode: str = "AUTO", mask_vertex_group: str = "", mask_image=None,
-             sdf_resolution: int = 32, sdf_padding: float = 0.1) -> dict:
+             sdf_resolution: int = 32, sdf_padding: float = 0.1, sdf_smoothing: float = sdf.SMOOTHING,
+             sdf_redistance_every: int = sdf.REDISTANCE_EVERY) -> dict:
     """Blocking optimisation; writes the result into the mesh (or the heightfield's image / grid,
     the SDF's marching cubes into the mesh, or the control points into the curve object).
-    progress(iteration, loss) may return False to stop. Returns {"losses": [...], "seconds": ...,
-    "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD" | "SDF" | "CURVE"}; SDF mode adds "sdf_shape"
-    (nz, ny, nx) and "voxel" (world units)."""
-    problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image, sdf_resolution, sdf_padding)
+    lr: world units per iteration (default 0.01), in SDF mode voxels per iteration (default
+    sdf.LEARNING_RATE). progress(iteration, loss) may return False to stop. Returns {"losses": [...],
+    "seconds": ..., "cancelled": ..., "mode": "MESH" | "HEIGHTFIELD" | "SDF" | "CURVE"}; SDF mode
+    adds "sdf_shape" (nz, ny, nx), "voxel" (world units) and "redistanced" (how often)."""
+    problem = Problem(obj, targets, spp, mode, mask_vertex_group, mask_image, sdf_resolution, sdf_padding,
+                      sdf_smoothing, sdf_redistance_every)
+    if lr is None:
+        lr = sdf.LEARNING_RATE if problem.sdf is not None else 0.01
     running = jobs.busy(problem.keys)
     if running is not None:  # a job in the UI writes the same object
         raise jobs.JobBusy(running)
@@ -382,14 +397,15 @@ def optimize(obj, targets, iterations: int = 50, spp: int = 8, lr: float = 0.01,
         return None if progress is None else progress(it, loss)
 
     t0 = time.perf_counter()
-    result = problem.limn.optim.fit(problem.views, problem.name, iterations=iterations, lr=lr, lambda_=lambda_, spp=spp,
+    result = problem.limn.optim.fit(problem.views, problem.name, iterations=iterations, lr=problem.step_size(lr),
+                                    lambda_=lambda_, spp=spp,
                                     faces=problem.faces, mask=problem.mask, callback=callback,
                                     project=problem.project, gradient=problem.gradient)
     problem.write_back(problem.views[0][0].params[problem.name])
     out = {"losses": result.losses, "seconds": time.perf_counter() - t0, "cancelled": result.cancelled,
            "mode": problem.mode}
     if problem.sdf is not None:
-        out.update(sdf_shape=tuple(problem.sdf.data.shape), voxel=problem.sdf.voxel)
+        out.update(sdf_shape=tuple(problem.sdf.data.shape), voxel=problem.sdf.voxel, redistanced=problem.sdf.redistanced)
     return out
 
 
@@ -449,7 +465,8 @@ class OptimizeJob(jobs.Job):
         try:
             problem.prepare(self.keep_going)  # SDF: voxelise here, off the main thread
             views = [(_Cancellable(scene, self.keep_going), target) for scene, target in problem.views]
-            problem.limn.optim.fit(views, problem.name, iterations=self.iterations, spp=spp, lr=lr, lambda_=lambda_,
+            problem.limn.optim.fit(views, problem.name, iterations=self.iterations, spp=spp, lr=problem.step_size(lr),
+                                   lambda_=lambda_,
                                    faces=problem.faces, mask=problem.mask, callback=callback, project=problem.project,
                                    gradient=problem.gradient)
         except problem.limn.RenderCancelled:
@@ -548,12 +565,18 @@ class LIMN_OT_target_add(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _learning_rate(s) -> float:
+    """The panel's learning rate for its mode: SDF mode has its own, in voxels per iteration."""
+    return s.sdf_learning_rate if s.optimize_mode == "SDF" else s.learning_rate
+
+
 def _mode_inputs(s) -> dict:
     """The panel's mode and masks as keyword arguments of Problem / optimize (the panel hides the
     masks in mesh mode, so they are not passed then)."""
     obj = s.optimize_object
     if s.optimize_mode == "SDF":
-        return {"mode": "SDF", "sdf_resolution": s.sdf_resolution, "sdf_padding": s.sdf_padding}
+        return {"mode": "SDF", "sdf_resolution": s.sdf_resolution, "sdf_padding": s.sdf_padding,
+                "sdf_smoothing": s.sdf_smoothing, "sdf_redistance_every": s.sdf_redistance_every}
     if s.optimize_mode in ("MESH", "CURVE") or (obj is not None and obj.type in CURVE_TYPES):
         return {"mode": s.optimize_mode}
     return {"mode": s.optimize_mode, "mask_vertex_group": s.mask_vertex_group, "mask_image": s.mask_image}
@@ -593,7 +616,7 @@ class LIMN_OT_optimize(bpy.types.Operator):
                 if it % 5 == 0 or it == s.iterations - 1:
                     print(f"limn: iteration {it + 1}/{s.iterations}  loss {loss:.6f}", flush=True)
             try:
-                out = optimize(s.optimize_object, targets, s.iterations, s.spp, s.learning_rate, s.large_steps_lambda, report,
+                out = optimize(s.optimize_object, targets, s.iterations, s.spp, _learning_rate(s), s.large_steps_lambda, report,
                                **_mode_inputs(s))
             except (ValueError, RuntimeError) as e:
                 self.report({"ERROR"}, str(e))
@@ -608,7 +631,7 @@ class LIMN_OT_optimize(bpy.types.Operator):
     def _start(self, context, s, targets):
         try:
             problem = Problem(s.optimize_object, targets, s.spp, **_mode_inputs(s))
-            self._job = OptimizeJob(problem, s.iterations, s.spp, s.learning_rate, s.large_steps_lambda)
+            self._job = OptimizeJob(problem, s.iterations, s.spp, _learning_rate(s), s.large_steps_lambda)
             self._job.start()
         except (ValueError, RuntimeError) as e:  # jobs.JobBusy is a ValueError
             self.report({"ERROR"}, str(e))

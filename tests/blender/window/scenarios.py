@@ -302,3 +302,66 @@ def curve_optimise(d):
     d.call(bpy.ops.ed.undo)
     yield 0.5
     d.record(undo_restored=bool(np.allclose(points(), start, atol=1e-6)))
+
+
+# ---- a signed-distance grid optimised from the panel (SDF mode) ---------------------------------------
+def _volume_closed(mesh):
+    """Enclosed volume and closedness (every edge shared by two faces) of a mesh (bmesh)."""
+    import bmesh
+    bm = bmesh.new()
+    bm.from_mesh(mesh)
+    closed = len(bm.faces) > 0 and all(e.is_manifold for e in bm.edges)
+    bmesh.ops.triangulate(bm, faces=bm.faces[:])
+    tris = np.array([[tuple(l.vert.co) for l in f.loops] for f in bm.faces], dtype=np.float64).reshape(-1, 3, 3)
+    bm.free()
+    return float(np.einsum("ij,ij->i", tris[:, 0], np.cross(tris[:, 1], tris[:, 2])).sum() / 6), closed
+
+
+def sdf_optimise(d):
+    """The modal operator in SDF mode with the panel's SDF defaults (learning rate, smoothing,
+    redistancing), 16 samples across: the mesh is rewritten by marching cubes while the worker runs
+    and at the end, the result is a closed mesh grown towards the 1.25 times larger target ball, one
+    undo brings the original mesh back. Screenshots (LIMN_WINDOW_SCREENSHOTS=1) of the viewport and
+    the panel during and after the run."""
+    addon = yield from _setup(d)
+    ball = _optimisation(d, addon, iterations=15)
+    s = bpy.context.scene.limn
+    s.optimize_mode, s.sdf_resolution, s.sdf_padding = "SDF", 16, 0.3
+    d.record(panel={"learning_rate": s.sdf_learning_rate, "smoothing": s.sdf_smoothing,
+                    "redistance_every": s.sdf_redistance_every})
+    # The Properties editor scrolled to the limn panel (the last one), the 3D view looking at the ball.
+    with bpy.context.temp_override(**d.properties_override()):
+        for _ in range(10):
+            bpy.ops.view2d.scroll_down(page=True)
+    window = bpy.context.window_manager.windows[0]
+    view = next(a for a in window.screen.areas if a.type == "VIEW_3D")
+    view.spaces.active.shading.type = "SOLID"
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o is ball)
+    bpy.context.view_layer.objects.active = ball
+    with bpy.context.temp_override(window=window, area=view, region=next(r for r in view.regions if r.type == "WINDOW")):
+        bpy.ops.view3d.view_selected()
+    bpy.ops.ed.undo_push(message="before limn")
+    mesh = ball.data
+    n0, (v0, closed0) = len(mesh.vertices), _volume_closed(mesh)
+    start = _vertices(mesh)
+    d.record(vertices_before=n0, volume_before=v0, closed_before=closed0, volume_target=1.25 ** 3 * v0)
+    yield 0.5
+    d.screenshot("sdf_before")
+    before = {t.ident for t in threading.enumerate()}
+    d.record(invoke=str(d.call(bpy.ops.limn.optimize)))
+    written = yield from _wait_for(lambda: len(bpy.data.objects["ball"].data.vertices) != n0, 120)
+    d.record(written_while_running=bool(written and _workers(before)))
+    yield 0.5
+    d.screenshot("sdf_running")
+    ended = yield from _wait_for(lambda: not _workers(before), 300)
+    yield 0.5                          # the modal operator's last tick writes the result
+    mesh = bpy.data.objects["ball"].data
+    v1, closed1 = _volume_closed(mesh)
+    d.record(ended=ended, vertices_after=len(mesh.vertices), volume_after=v1, closed_after=closed1,
+             flat=not any(p.use_smooth for p in mesh.polygons), material=mesh.materials[0].name if mesh.materials else "")
+    d.screenshot("sdf_finished")
+    d.call(bpy.ops.ed.undo)
+    yield 0.5
+    back = bpy.data.objects["ball"].data
+    d.record(undo_restored=len(back.vertices) == n0 and bool(np.array_equal(_vertices(back), start)))
