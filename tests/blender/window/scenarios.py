@@ -324,15 +324,19 @@ def sdf_optimise(d):
     undo brings the original mesh back. Screenshots (LIMN_WINDOW_SCREENSHOTS=1) of the viewport and
     the panel during and after the run."""
     addon = yield from _setup(d)
-    ball = _optimisation(d, addon, iterations=15)
+    ball = _optimisation(d, addon, iterations=8)
     s = bpy.context.scene.limn
     s.optimize_mode, s.sdf_resolution, s.sdf_padding = "SDF", 16, 0.3
     d.record(panel={"learning_rate": s.sdf_learning_rate, "smoothing": s.sdf_smoothing,
                     "redistance_every": s.sdf_redistance_every})
-    # The Properties editor scrolled to the limn panel (the last one), the 3D view looking at the ball.
+    # The Properties editor scrolled to the limn panel (the last one; Workbench has few render panels
+    # above it), the 3D view looking at the ball.
+    bpy.context.scene.render.engine = "BLENDER_WORKBENCH"
+    yield 0.3
     with bpy.context.temp_override(**d.properties_override()):
         for _ in range(10):
             bpy.ops.view2d.scroll_down(page=True)
+    yield 0.3
     window = bpy.context.window_manager.windows[0]
     view = next(a for a in window.screen.areas if a.type == "VIEW_3D")
     view.spaces.active.shading.type = "SOLID"
@@ -350,11 +354,11 @@ def sdf_optimise(d):
     d.screenshot("sdf_before")
     before = {t.ident for t in threading.enumerate()}
     d.record(invoke=str(d.call(bpy.ops.limn.optimize)))
-    written = yield from _wait_for(lambda: len(bpy.data.objects["ball"].data.vertices) != n0, 120)
+    written = yield from _wait_for(lambda: len(bpy.data.objects["ball"].data.vertices) != n0, 300)
     d.record(written_while_running=bool(written and _workers(before)))
     yield 0.5
     d.screenshot("sdf_running")
-    ended = yield from _wait_for(lambda: not _workers(before), 300)
+    ended = yield from _wait_for(lambda: not _workers(before), 600)
     yield 0.5                          # the modal operator's last tick writes the result
     mesh = bpy.data.objects["ball"].data
     v1, closed1 = _volume_closed(mesh)

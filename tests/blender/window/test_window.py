@@ -175,11 +175,12 @@ def test_curve_object_optimised_from_the_panel(tmp_path, display):
 
 
 def test_sdf_optimised_from_the_panel(tmp_path, display):
-    """SDF mode from the panel (modal operator, worker thread) on the ball, 15 iterations at the
+    """SDF mode from the panel (modal operator, worker thread) on the ball, 8 iterations at the
     panel's SDF defaults: the mesh is rewritten (marching cubes) while the worker runs, the run
     ends, the result is closed, flat shaded, keeps its material and has grown towards the target
     (volume 1.25^3 times the ball's), Blender quits cleanly, and one undo brings the ball back."""
-    code, output, facts, seconds = run_scenario("sdf_optimise", tmp_path, display, timeout=480.0)
+    # About a minute on an idle 2-core machine; 8 minutes were not enough at a load average of 30.
+    code, output, facts, seconds = run_scenario("sdf_optimise", tmp_path, display, timeout=900.0)
     assert facts.get("invoke") == "{'RUNNING_MODAL'}", facts
     assert facts.get("panel") == {"learning_rate": pytest.approx(0.1), "smoothing": pytest.approx(10.0),
                                   "redistance_every": 5}, facts
@@ -189,7 +190,8 @@ def test_sdf_optimised_from_the_panel(tmp_path, display):
           f"{facts['vertices_after']} vertices, {seconds:.0f} s")
     assert facts.get("closed_before") and facts.get("closed_after") and facts.get("flat"), facts
     assert facts.get("material") == "ball_mat", facts
-    # 15 iterations at 4 spp: most of the way (the headless test checks arrival at 25 iterations, 8 spp).
-    assert v0 + 0.6 * (target - v0) < v1 < 1.15 * target, facts
+    # 8 iterations at 4 spp: a quarter of the way at least (measured outside Blender at 8 spp: 0.3 of
+    # the way after 5 iterations, 0.7 after 10); the headless test checks arrival (25 iterations).
+    assert v0 + 0.25 * (target - v0) < v1 < 1.15 * target, facts
     assert facts.get("undo_restored"), facts
     assert_clean_exit(code, output, facts)
