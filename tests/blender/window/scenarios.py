@@ -365,6 +365,15 @@ def sdf_optimise(d):
     d.record(ended=ended, vertices_after=len(mesh.vertices), volume_after=v1, closed_after=closed1,
              flat=not any(p.use_smooth for p in mesh.polygons), material=mesh.materials[0].name if mesh.materials else "")
     d.screenshot("sdf_finished")
+    # The panel with the SDF settings: the Properties editor filling the window, scrolled to its end.
+    with bpy.context.temp_override(**d.properties_override()):
+        bpy.ops.screen.screen_full_area()
+    yield 0.3
+    with bpy.context.temp_override(**d.properties_override()):
+        for _ in range(10):
+            bpy.ops.view2d.scroll_down(page=True)
+    yield 0.3
+    d.screenshot("sdf_panel")
     d.call(bpy.ops.ed.undo)
     yield 0.5
     back = bpy.data.objects["ball"].data
