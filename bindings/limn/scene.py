@@ -240,7 +240,7 @@ class Scene:
         interval of a pixel's theta range (Eq. 5) instead of choosing one (Eq. 6);
         ``heightfield_reparam=False`` holds the split points fixed, which drops the visibility part
         of the derivative (a diagnostic, like ``spp_boundary=0``); ``heightfield_delta_edges=False``
-        drops only the boundary term of point lights' shadow edges cast by heightfields.
+        drops only the boundary term of point and directional lights' shadow edges cast by heightfields.
 
         ``last_stats["summary"]`` lists what was computed and what was skipped."""
         options = self._diff_options(spp, seed, spp_interior, spp_primary, spp_boundary, options)

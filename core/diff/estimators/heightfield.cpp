@@ -21,6 +21,9 @@ void HeightfieldCounters::add(const HeightfieldCounters& o) {
   empty_ranges += o.empty_ranges;
   edge_samples += o.edge_samples;
   edge_splats += o.edge_splats;
+  other_shadow_blocks += o.other_shadow_blocks;
+  if (shadow_blockers.size() < o.shadow_blockers.size()) shadow_blockers.resize(o.shadow_blockers.size(), 0);
+  for (size_t i = 0; i < o.shadow_blockers.size(); ++i) shadow_blockers[i] |= o.shadow_blockers[i];
 }
 
 HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams& params, const HeightfieldOptions& options,
@@ -81,7 +84,14 @@ HeightfieldEstimator::HeightfieldEstimator(const Scene& scene, const DiffParams&
       m_area_emitters.push_back(std::move(t));
     } else if (std::holds_alternative<PointEmitter>(e.model) || std::holds_alternative<DirectionalEmitter>(e.model)) {
       m_delta_emitters.push_back(int(i));
-      if (std::holds_alternative<PointEmitter>(e.model)) m_point_lights.push_back(int(i));
+      // Shadow edges of both kinds of light (delta_edge_sample); a directional light travelling
+      // upwards (lighting the fields' undersides) is left out: its grazing rays are not records
+      // of z - k t from above (summary).
+      const auto* dir = std::get_if<DirectionalEmitter>(&e.model);
+      if (!dir || glm::dot(glm::normalize(Vec3d(std::get<Heightfield>(scene.shapes[m_shape].geometry).world_from_local.vector(
+                                              Vec3(0, 0, 1)))),
+                           Vec3d(dir->direction)) < 0.0)
+        m_edge_lights.push_back(int(i));
     }
   }
 }
@@ -412,7 +422,22 @@ struct HeightfieldPath {
     return R.bsdf_eval(bsdf, x, wi, w) * R.emitter_value(et.emitter, rad) * (sin(theta) * w_phi * w_theta * Var(double(K)));
   }
 
-  // Point and directional lights by a shadow ray (their shadow edges are not differentiated).
+  // Whether a shadow ray is blocked. The first blocker of a blocked ray is looked up (one more
+  // ray) and noted when it is no heightfield: its shadow edges get no term (the summary names it).
+  bool shadowed(const Ray& r) {
+    if (!scene.occluded(r)) return false;
+    SurfaceInteraction b;
+    ++cnt.rays;
+    if (scene.intersect(r, b) && !std::holds_alternative<Heightfield>(scene.shapes[b.shape].geometry)) {
+      ++cnt.other_shadow_blocks;
+      if (cnt.shadow_blockers.size() <= size_t(b.shape)) cnt.shadow_blockers.resize(scene.shapes.size(), 0);
+      cnt.shadow_blockers[b.shape] = 1;
+    }
+    return true;
+  }
+
+  // Point and directional lights by a shadow ray (the shadow edges heightfields cast get the
+  // boundary term of delta_edges; other occluders' do not).
   VV delta_light_samples(const DiffVertex& x, const SurfaceInteraction& si, const VV& wi, int bsdf) {
     VV L;
     for (int idx : E.m_delta_emitters) {
@@ -420,13 +445,13 @@ struct HeightfieldPath {
       ++cnt.delta_light_samples;
       ++cnt.rays;
       if (const auto* pt = std::get_if<PointEmitter>(&e.model)) {
-        if (scene.occluded(spawn_ray_to(si, pt->position))) continue;
+        if (shadowed(spawn_ray_to(si, pt->position))) continue;
         const VV dvec = constant(pt->position) - x.p;
         const Var d2 = dot(dvec, dvec);
         const VV w_dir = dvec / sqrt(d2);
         L = L + R.bsdf_eval(bsdf, x, wi, w_dir) * R.emitter_value(idx, pt->intensity) / d2 * R.point_falloff(*pt, w_dir);
       } else if (const auto* dir = std::get_if<DirectionalEmitter>(&e.model)) {
-        if (scene.occluded(spawn_ray(si, -dir->direction))) continue;
+        if (shadowed(spawn_ray(si, -dir->direction))) continue;
         L = L + R.bsdf_eval(bsdf, x, wi, constant(-dir->direction)) * R.emitter_value(idx, dir->irradiance);
       }
     }
@@ -494,50 +519,102 @@ struct HeightfieldPath {
     return si.shape == shape && std::abs(si.t - dist) <= 1e-3f * dist;
   }
 
-  // The direct light of point light `light` at the camera's hit at film point f: visible or not,
-  // and whether the camera sees `shape` there.
-  bool probe(const Vec2& f, int shape, const Vec3& light, bool& lit) {
+  // Whether the delta light `light` reaches surface point si (a shadow ray).
+  bool lit_by(int light, const SurfaceInteraction& si) {
+    ++cnt.rays;
+    if (const auto* pt = std::get_if<PointEmitter>(&scene.emitters[light].model)) return !scene.occluded(spawn_ray_to(si, pt->position));
+    return !scene.occluded(spawn_ray(si, -std::get<DirectionalEmitter>(scene.emitters[light].model).direction));
+  }
+
+  // The direct light of delta light `light` at the camera's hit at film point f: lit or not, and
+  // whether the camera sees `shape` there.
+  bool probe(const Vec2& f, int shape, int light, bool& lit) {
     SurfaceInteraction si;
     ++cnt.rays;
     if (!scene.intersect(scene.camera.generate_ray(f), si) || si.shape != shape) return false;
-    ++cnt.rays;
-    lit = !scene.occluded(spawn_ray_to(si, light));
+    lit = lit_by(light, si);
     return true;
   }
 
+  // One sample of the shadow edges the heightfields cast under a point or directional light
+  // (HeightfieldEstimator::delta_edge_sample). The edges are parameterised by a slice coordinate
+  // u, a tape input without a parameter slot (d(film)/du is read from its adjoint): for a point
+  // light the azimuth around it (slices through the light), for a directional light the offset
+  // across its horizontal direction (parallel slices along it, over the field's footprint).
   bool delta_edges(std::vector<HeightfieldSplat>& splats, std::vector<Var>& vel) {
-    const size_t K = E.m_point_lights.size(), NF = frames.size();
-    const int light = E.m_point_lights[std::min(K - 1, size_t(rng.next_float() * K))];
+    const size_t K = E.m_edge_lights.size(), NF = frames.size();
+    const int light = E.m_edge_lights[std::min(K - 1, size_t(rng.next_float() * K))];
     const DiffHeightfieldFrame& G = frames[std::min(NF - 1, size_t(rng.next_float() * NF))];
-    const PointEmitter& pt = std::get<PointEmitter>(scene.emitters[light].model);
-    const double phi0 = 2.0 * kPiD * double(rng.next_float());
-    const double inv_pdf = 2.0 * kPiD * double(K) * double(NF);
+    const PointEmitter* pt = std::get_if<PointEmitter>(&scene.emitters[light].model);
+    const DirectionalEmitter* dl = std::get_if<DirectionalEmitter>(&scene.emitters[light].model);
+    const double u_rand = double(rng.next_float());
     ++cnt.edge_samples;
-    const VV P = constant(pt.position);
-    const VV ol = G.to_local_point(P);
-    // phi is a tape input without a parameter slot: d(film)/d(phi) is read from its adjoint.
-    const Var phi = Var::input(phi0);
-    const Var dx = cos(phi), dy = sin(phi);
+    const Heightfield& hf = G.hf;
+    // The slice: origin ol (local frame, taped in u) and horizontal direction (dx, dy); 1 / pdf of u.
+    Var u, dx, dy;
+    VV ol;
+    double inv_pdf = double(K) * double(NF), k_light = 0.0;
+    VV Dw;  // directional: the world direction of travel
+    if (pt) {
+      u = Var::input(2.0 * kPiD * u_rand);
+      inv_pdf *= 2.0 * kPiD;
+      ol = G.to_local_point(constant(pt->position));
+      dx = cos(u);
+      dy = sin(u);
+    } else {
+      Dw = constant(dl->direction);
+      const VV dloc = G.to_local_vector(Dw);
+      const double h = std::sqrt(dloc.x.v * dloc.x.v + dloc.y.v * dloc.y.v);
+      // A light straight down casts no shadow edge from a heightfield (a graph has no overhang);
+      // 1e-9: below it the slices' direction is rounding.
+      if (!(h > 1e-9 * std::abs(dloc.z.v))) return false;
+      dx = Var(dloc.x.v / h);
+      dy = Var(dloc.y.v / h);
+      k_light = dloc.z.v / h;  // rise per horizontal unit along (dx, dy): negative, the light comes from above
+      // Offsets across (-dy, dx) that meet the footprint: the corners' extent.
+      double lo = 1e300, hi = -1e300;
+      for (double cx : {-0.5 * hf.width, 0.5 * hf.width})
+        for (double cy : {-0.5 * hf.depth, 0.5 * hf.depth}) {
+          const double w = -dy.v * cx + dx.v * cy;
+          lo = std::min(lo, w);
+          hi = std::max(hi, w);
+        }
+      u = Var::input(lo + (hi - lo) * u_rand);
+      inv_pdf *= hi - lo;
+      // Start behind the footprint (its half diagonal back from the centre line), so that the
+      // near edge is a footprint edge the slice enters by.
+      const double back = 0.5 * std::sqrt(double(hf.width) * hf.width + double(hf.depth) * hf.depth) * 1.01;
+      ol = VV(-dy * u - dx * Var(back), dx * u - dy * Var(back), Var(0.5 * (hf.min_height() + hf.max_height())));
+    }
     ++cnt.searches;
-    const std::vector<SlicePeak> peaks =
-        find_peaks(G.hf, Vec3d(ol.x.v, ol.y.v, ol.z.v), glm::dvec2(dx.v, dy.v), -1e30, 1e30, E.m_opt.search, &cnt.search);
+    const Vec3d o0(ol.x.v, ol.y.v, ol.z.v);
+    const glm::dvec2 d0(dx.v, dy.v);
+    const std::vector<SlicePeak> peaks = pt ? find_peaks(hf, o0, d0, -1e30, 1e30, E.m_opt.search, &cnt.search)
+                                            : find_parallel_peaks(hf, o0, d0, k_light, E.m_opt.search, &cnt.search);
     const CameraView view(scene.camera);
     const Vec3 eye = view.eye_world;
+    // Directional light: a virtual light this far behind each peak (world units: the footprint's
+    // diagonal), so that both kinds continue their grazing ray alike below.
+    const double L_virtual = std::sqrt(double(hf.width) * hf.width + double(hf.depth) * hf.depth) * G.scale.v;
     bool any = false;
     for (const SlicePeak& p : peaks) {
-      const Var t = p.border ? border_t(G.hf, ol, dx, dy, p.t) : Var(p.t);
+      // The grazing point at fixed horizontal distance: k (slope from a point, or intercept along
+      // parallel rays) is stationary in t there (Eq. 12), so its derivative is the partial at fixed
+      // t; footprint edges keep to their edge.
+      const Var t = p.border ? border_t(hf, ol, dx, dy, p.t) : Var(p.t);
       Var z, zx, zy;
       G.height(in, ol.x + dx * t, ol.y + dy * t, z, zx, zy);
       const VV xb = G.to_world_point(VV(ol.x + dx * t, ol.y + dy * t, z));
-      const VV D = ad::normalize(xb - P);
+      const VV P = pt ? constant(pt->position) : xb - Dw * Var(L_virtual);
+      const VV D = pt ? ad::normalize(xb - P) : Dw;
       const Vec3 D0(float(D.x.v), float(D.y.v), float(D.z.v));
       const float tb = float(ad::length(xb - P).v);
       // The ray beyond the grazing point. It runs within a second-order distance of the surface
       // there, and the intersector's near-tangent test reports the grazing point itself as a hit:
       // starting 1e-4 of the distance beyond it lost 13 % of this term on the cone (FD's
       // projection z -6.7). 1 % skips that; a receiver closer behind the peak than 1 % of the
-      // light's distance is lost (docs/heightfields.md, Limits).
-      const Ray ray{pt.position, D0, tb * 1.01f, std::numeric_limits<float>::infinity()};
+      // light's distance (directional: of the footprint's diagonal) is lost (docs/heightfields.md, Limits).
+      const Ray ray{Vec3(float(P.x.v), float(P.y.v), float(P.z.v)), D0, tb * 1.01f, std::numeric_limits<float>::infinity()};
       SurfaceInteraction si;
       ++cnt.rays;
       if (!scene.intersect(ray, si)) continue;
@@ -548,27 +625,33 @@ struct HeightfieldPath {
       if (!(pc.z.v > view.proj.near)) continue;
       Var fx, fy;
       view.proj.film(pc, fx, fy);
-      // The edge's film tangent ds/dphi.
+      // The edge's film tangent ds/du.
       std::vector<double> adj;
       ad::Tape::current().backward(fx.idx, 1.0, adj);
-      const double tx = phi.idx < int(adj.size()) ? adj[phi.idx] : 0.0;
+      const double tx = u.idx < int(adj.size()) ? adj[u.idx] : 0.0;
       ad::Tape::current().backward(fy.idx, 1.0, adj);
-      const double ty = phi.idx < int(adj.size()) ? adj[phi.idx] : 0.0;
+      const double ty = u.idx < int(adj.size()) ? adj[u.idx] : 0.0;
       const double len = std::sqrt(tx * tx + ty * ty);
       if (!(len > 0.0) || !std::isfinite(len)) continue;
       const glm::dvec2 n(-ty / len, tx / len);
       // Probes 1e-3 pixels either side (as the primary term's): which side the light reaches.
       const double delta = 1e-3;  // 1e-2 and 5e-2 gave the same term (sums within 2.5 %)
       bool lit_minus = false, lit_plus = false;
-      if (!probe(Vec2(float(fx.v - delta * n.x), float(fy.v - delta * n.y)), si.shape, pt.position, lit_minus) ||
-          !probe(Vec2(float(fx.v + delta * n.x), float(fy.v + delta * n.y)), si.shape, pt.position, lit_plus) || lit_minus == lit_plus)
+      if (!probe(Vec2(float(fx.v - delta * n.x), float(fy.v - delta * n.y)), si.shape, light, lit_minus) ||
+          !probe(Vec2(float(fx.v + delta * n.x), float(fy.v + delta * n.y)), si.shape, light, lit_plus) || lit_minus == lit_plus)
         continue;
-      // The point light's direct contribution at y towards the camera (primal).
-      const VV to_light = P - y.p;
-      const Var d2 = dot(to_light, to_light);
-      const VV wl = to_light / sqrt(d2), we = ad::normalize(constant(eye) - y.p);
-      const VV f = R.bsdf_eval(scene.shapes[si.shape].bsdf, y, we, wl) * R.emitter_value(light, pt.intensity) / d2 *
-                   R.point_falloff(pt, wl);
+      // The light's direct contribution at y towards the camera (primal).
+      const VV we = ad::normalize(constant(eye) - y.p);
+      const int bsdf = scene.shapes[si.shape].bsdf;
+      VV f;
+      if (pt) {
+        const VV to_light = P - y.p;
+        const Var d2 = dot(to_light, to_light);
+        const VV wl = to_light / sqrt(d2);
+        f = R.bsdf_eval(bsdf, y, we, wl) * R.emitter_value(light, pt->intensity) / d2 * R.point_falloff(*pt, wl);
+      } else {
+        f = R.bsdf_eval(bsdf, y, we, -Dw) * R.emitter_value(light, dl->irradiance);
+      }
       const double sign = lit_minus ? 1.0 : -1.0;  // f(s - delta n) - f(s + delta n)
       const double w = sign * len * inv_pdf;
       const Spectrum value(float(f.x.v * w), float(f.y.v * w), float(f.z.v * w));
@@ -721,13 +804,26 @@ std::vector<std::string> HeightfieldEstimator::summary(int spp, const Heightfiel
                    : std::string()));
   s.push_back("primary visibility and indirect boundary terms: not needed (the heightfield estimator reparameterises them)");
   if (c.edge_samples)
-    s.push_back("point-light shadow edges cast by heightfields: " + std::to_string(c.edge_samples) + " samples, " +
+    s.push_back("point/directional light shadow edges cast by heightfields: " + std::to_string(c.edge_samples) + " samples, " +
                 std::to_string(c.edge_splats) + " reached the film");
-  if (c.delta_light_samples)
+  if (c.delta_light_samples) {
+    std::string left_out;  // delta lights whose shadow edges get no term
+    for (int i : m_delta_emitters)
+      if (!has_delta_edges() || std::find(m_edge_lights.begin(), m_edge_lights.end(), i) == m_edge_lights.end())
+        left_out += (left_out.empty() ? "'" : ", '") + m_scene.emitters[i].id + "'";
     s.push_back("point/directional lights: " + std::to_string(c.delta_light_samples) + " shadow rays; " +
-                (has_delta_edges() ? std::string("not differentiated: directional lights' shadow edges and other occluders' "
-                                                 "shadow edges on a heightfield")
-                                   : std::string("their shadow edges are not differentiated (use area emitters for shadow derivatives)")));
+                (left_out.empty() ? std::string("the shadow edges heightfields cast are differentiated")
+                                  : "not differentiated: the shadow edges of " + left_out +
+                                        (has_delta_edges() ? " (a directional light from below)" : " (heightfield_delta_edges off)")));
+  }
+  if (c.other_shadow_blocks) {
+    std::string names;
+    for (size_t i = 0; i < c.shadow_blockers.size(); ++i)
+      if (c.shadow_blockers[i]) names += (names.empty() ? "'" : ", '") + m_scene.shapes[i].id + "'";
+    s.push_back("warning: " + std::to_string(c.other_shadow_blocks) + " shadow rays to point/directional lights were blocked by " +
+                names + ", not a heightfield: the shadow edges of other occluders are not differentiated, so derivatives may be "
+                "biased where those shadows fall on a moving heightfield");
+  }
   if (c.other_shape_hits)
     s.push_back("warning: " + std::to_string(c.other_shape_hits) +
                 " rays met shapes other than the heightfield and emitters, whose silhouettes are not split: derivatives may be "

@@ -12,9 +12,9 @@
 //
 // Strategies per vertex (a partition, no MIS, so the derivative of each stays unbiased):
 //   * area emitters only through emitter-domain sampling (App. A.1), one emitter chosen uniformly;
-//   * point and directional lights by a shadow ray; point lights' shadow edges cast by the
-//     heightfields by a boundary term splatted to the film (delta_edge_sample); directional lights'
-//     and other occluders' shadow edges are NOT differentiated (named in the summary);
+//   * point and directional lights by a shadow ray; their shadow edges cast by the heightfields
+//     by a boundary term splatted to the film (delta_edge_sample); other occluders' shadow edges
+//     are NOT differentiated (named in the summary);
 //   * everything else by uniform phi and theta over the continuation range (App. A.2), which
 //     ignores area-emitter emission; escaping rays pick up infinite emitters.
 // The camera ray is the pixel domain in the same coordinates (App. A.1). Several heightfields may
@@ -47,7 +47,7 @@ struct HeightfieldOptions {
   // choosing one (Eq. 6). Only pixels holding a split cost more (a path per interval); on the cone
   // the summed per-pixel variance fell 7.7-8x at the same time per call, on the terrain it is the same.
   bool camera_every_interval = true;
-  // The boundary term of point lights' shadow edges cast by heightfields (delta_edge_sample).
+  // The boundary term of point and directional lights' shadow edges cast by heightfields (delta_edge_sample).
   bool delta_edges = true;
 };
 
@@ -63,10 +63,12 @@ struct HeightfieldCounters {
   uint64_t searches = 0;            // peak searches
   PeakSearchStats search;           // their mipmap nodes and cells
   uint64_t other_shape_hits = 0;    // rays that met an occluder whose edges are not split
-  uint64_t delta_light_samples = 0; // shadow rays to point / directional lights (edges not differentiated)
+  uint64_t delta_light_samples = 0; // shadow rays to point / directional lights
   uint64_t empty_ranges = 0;        // pixel or emitter samples whose theta-range was empty (value 0)
-  uint64_t edge_samples = 0;        // point-light shadow edge samples (delta_edge_sample)
+  uint64_t edge_samples = 0;        // point / directional light shadow edge samples (delta_edge_sample)
   uint64_t edge_splats = 0;         // ... that reached the film
+  uint64_t other_shadow_blocks = 0; // shadow rays to delta lights blocked by a shape that is no heightfield
+  std::vector<char> shadow_blockers;  // per shape: 1 if it blocked one of them
   void add(const HeightfieldCounters& o);
 };
 
@@ -82,16 +84,19 @@ class HeightfieldEstimator {
 
   int heightfield_shape() const { return m_shape; }
 
-  // Point lights' shadow edges cast by the heightfields: a boundary term splatted to the film,
-  // since those edges are not split points of the slices the estimator samples. One sample: a
-  // point light, a field, an azimuth phi around the light (uniform); every peak of that slice
-  // seen from the light is a grazing ray (Eq. 12: its slope's derivative is the partial at fixed
-  // t); the ray continues to the receiver y, seen directly by the camera. Adds to the film point
-  // of y: (f(s - delta n) - f(s + delta n)) |ds/dphi| / pdf times d(s . n), n the film normal of
-  // the edge. Values are per sample (the caller divides by the count). False: nothing added.
+  // Point and directional lights' shadow edges cast by the heightfields: a boundary term
+  // splatted to the film, since those edges are not split points of the slices the estimator
+  // samples. One sample: a light, a field, a slice u (uniform): for a point light the azimuth
+  // around it, for a directional light the offset of a vertical slice along its direction,
+  // across the footprint. Every peak of that slice as the light sees it (find_peaks from the
+  // point, find_parallel_peaks along the direction) is a grazing ray (Eq. 12: its slope or
+  // intercept's derivative is the partial at fixed t); the ray continues to the receiver y, seen
+  // directly by the camera. Adds to the film point of y: (f(s - delta n) - f(s + delta n))
+  // |ds/du| / pdf times d(s . n), n the film normal of the edge. Values are per sample (the
+  // caller divides by the count). False: nothing added.
   bool delta_edge_sample(Pcg32& rng, PathInputs& in, std::vector<HeightfieldSplat>& splats, std::vector<ad::Var>& velocity,
                          HeightfieldCounters& counters) const;
-  bool has_delta_edges() const { return m_opt.delta_edges && m_opt.reparameterize && !m_point_lights.empty(); }
+  bool has_delta_edges() const { return m_opt.delta_edges && m_opt.reparameterize && !m_edge_lights.empty(); }
   // What the estimator computed and left out, for DiffStats::summary.
   std::vector<std::string> summary(int spp, const HeightfieldCounters& counters) const;
 
@@ -108,7 +113,7 @@ class HeightfieldEstimator {
   std::vector<int> m_shapes;    // every heightfield (m_shape first); all share the up axis
   std::vector<EmitterTriangles> m_area_emitters;
   std::vector<int> m_delta_emitters;
-  std::vector<int> m_point_lights;
+  std::vector<int> m_edge_lights;  // point lights and directional lights from above (delta_edge_sample)
 
   friend struct HeightfieldPath;
 };

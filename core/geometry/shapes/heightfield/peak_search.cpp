@@ -10,10 +10,12 @@ struct Node {
   double t0, t1;
 };
 
-}  // namespace
-
-std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_start, double k_stop,
-                                  const PeakSearchOptions& opt, PeakSearchStats* stats, bool* blocked) {
+// The search for both kinds of slice: from the point o (parallel == false: k is the slope
+// (z - o_z) / t of the line from o, the running line o_z + k_run t turns about o) or along rays
+// of fixed slope k_light (parallel: k is the intercept g = z - k_light t, the running line
+// k_run + k_light t moves up). Everything else (records, skips, bisection) is shared.
+std::vector<SlicePeak> search(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_start, double k_stop,
+                              const PeakSearchOptions& opt, PeakSearchStats* stats, bool* blocked, bool parallel, double k_light) {
   std::vector<SlicePeak> peaks;
   if (blocked) *blocked = false;
   PeakSearchStats local_stats;
@@ -34,10 +36,14 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     const double c = hf.grid_c(x), r = hf.grid_r(y);
     const bool in_cell = cell.i >= 0 && c >= cell.i - 1e-9 && c <= cell.i + 1 + 1e-9 && r >= cell.j - 1e-9 && r <= cell.j + 1 + 1e-9;
     const HeightSample h = in_cell ? cell.eval(hf, x, y) : hf.eval(x, y);
-    const double k = (h.z - o.z) / t;
-    return Sample{t, k, (h.dx * d.x + h.dy * d.y) - k};
+    const double k = parallel ? h.z - k_light * t : (h.z - o.z) / t;
+    // dk/dt: (z' - k) / t from a point (t > 0, so its sign), z' - k_light for parallel rays.
+    return Sample{t, k, (h.dx * d.x + h.dy * d.y) - (parallel ? k_light : k)};
   };
   double k_run = k_start;
+  // The running line's height at t and its slope.
+  auto line = [&](double t) { return parallel ? k_run + k_light * t : o.z + k_run * t; };
+  auto line_slope = [&]() { return parallel ? k_light : k_run; };
   if (t_in > 0.0) {  // the origin is outside the footprint: the near edge hides what passes under it
     const double k = sample_at(t_in).k;
     if (k > k_run && k < k_stop) peaks.push_back({t_in, k, true});
@@ -81,14 +87,16 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     const double slack = eps + 1e-9 * (std::abs(rise) + std::abs(slope) * (n.t0 + dt) + C * dt * (n.t0 + dt));
     // Hidden: the parabola z0 + z0' s + C s^2 / 2 minus the line is convex, so under it at both ends
     // means under it everywhere.
-    if (rise <= k_run * n.t0 - slack && rise + slope * dt + 0.5 * C * dt * dt <= k_run * n.t1 - slack) {
+    if (h.z <= line(n.t0) - slack && h.z + slope * dt + 0.5 * C * dt * dt <= line(n.t1) - slack) {
       ++st.curvature_hidden;
       return Shape::hidden;
     }
     // Rising: t dk/dt = z'(t) - k(t) >= (t0 (z0' - k0) - C t0 s - 1.5 C s^2) / t at t = t0 + s (from
     // z' >= z0' - C s and the parabola), decreasing in s: positive at s = dt means k rises through
     // the whole node, so it holds no maximum and only its far end matters.
-    if (n.t0 * slope - rise > C * dt * (n.t0 + 1.5 * dt) + slack) {
+    // Parallel rays: dk/dt = z' - k_light >= z0' - C s - k_light, positive at s = dt.
+    if (parallel ? slope - k_light > C * dt + 1e-9 * (std::abs(slope) + std::abs(k_light) + C * dt)
+                 : n.t0 * slope - rise > C * dt * (n.t0 + 1.5 * dt) + slack) {
       ++st.curvature_rising;
       return Shape::rising;
     }
@@ -102,8 +110,8 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
     stack.pop_back();
     ++st.nodes;
     // Lowest point of the line o_z + k_run t over the node's span.
-    const double line_min = o.z + k_run * (k_run >= 0.0 ? n.t0 : n.t1);
-    if (k_run >= 0.0 && o.z + k_run * n.t0 > z_max + eps) break;  // the line is above everything that follows
+    const double line_min = line(line_slope() >= 0.0 ? n.t0 : n.t1);
+    if (line_slope() >= 0.0 && line(n.t0) > z_max + eps) break;  // the line is above everything that follows
     const Heightfield::Level& L = hf.mip[n.level];
     const size_t k = size_t(n.j) * L.w + n.i;
     const Shape shape = !opt.use_mipmap                ? Shape::unknown
@@ -149,6 +157,18 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
   if (k_run < k_stop && last_is_record && std::abs(last_t - t_out) <= 1e-9 * std::max(1.0, t_out))
     peaks.push_back({t_out, prev.k, true});
   return peaks;
+}
+
+}  // namespace
+
+std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_start, double k_stop,
+                                  const PeakSearchOptions& opt, PeakSearchStats* stats, bool* blocked) {
+  return search(hf, o, d, k_start, k_stop, opt, stats, blocked, false, 0.0);
+}
+
+std::vector<SlicePeak> find_parallel_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_light,
+                                           const PeakSearchOptions& opt, PeakSearchStats* stats) {
+  return search(hf, o, d, -1e300, 1e300, opt, stats, nullptr, true, k_light);
 }
 
 }  // namespace limn

@@ -49,4 +49,12 @@ std::vector<SlicePeak> find_peaks(const Heightfield& hf, const Vec3d& o, const g
                                   const PeakSearchOptions& options = {}, PeakSearchStats* stats = nullptr,
                                   bool* blocked = nullptr);
 
+// The same search for rays of one fixed direction (a directional light): along the slice from o in
+// direction d the rays are the lines z = g + k_light t. A ray grazes the surface where
+// g(t) = z(o + t d) - k_light t has a local maximum higher than every g before it (the ray is
+// tangent there and above the surface before it); SlicePeak::k is then that g. The footprint's
+// near edge (o outside the footprint) and far edge (g still rising) count as for find_peaks.
+std::vector<SlicePeak> find_parallel_peaks(const Heightfield& hf, const Vec3d& o, const glm::dvec2& d, double k_light,
+                                           const PeakSearchOptions& options = {}, PeakSearchStats* stats = nullptr);
+
 }  // namespace limn
