@@ -20,7 +20,7 @@ mean distance between the two centre lines (each curve's B-spline sampled at 32 
 each sample's distance to the nearest sample of the other curve's centre line, averaged both ways
 and over the curves), plus the radii's RMS error.
 
-Usage: nice .venv/bin/python tests/bench/curve_recovery.py [--iterations 200] [--out docs/reports/curves]
+Usage: nice .venv/bin/python tests/bench/curve_recovery.py [--iterations 100] [--out docs/reports/curves]
 Writes <out>/recovery.md, recovery_curves.png (loss and geometric error against time) and
 recovery.png (rows: the 3 views; columns: target | start | result).
 """
@@ -134,7 +134,7 @@ def geometric_error(points, target, offsets):
     return cp, float(np.mean(dist)), rad
 
 
-def run(iterations=200, size=64, views=3, curves=4, points=6, lr=0.01, lr_radius=0.002, lambda_=10.0, spp=4,
+def run(iterations=100, size=64, views=3, curves=4, points=6, lr=0.03, lr_radius=0.003, lambda_=4.0, spp=4,
         spp_boundary=16, levels=4, target_spp=256, zero_gradient=False, seed=0, log=None):
     """Optimise from the start to the targets; returns a dict of rows (iteration, seconds, loss,
     control-point RMS, centre-line distance, radius RMS), the images and the final points.
@@ -198,10 +198,10 @@ def plot(rows, path):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--iterations", type=int, default=200)
-    ap.add_argument("--lr", type=float, default=0.01)
-    ap.add_argument("--lr-radius", type=float, default=0.002)
-    ap.add_argument("--lambda", dest="lambda_", type=float, default=10.0)
+    ap.add_argument("--iterations", type=int, default=100)
+    ap.add_argument("--lr", type=float, default=0.03)
+    ap.add_argument("--lr-radius", type=float, default=0.003)
+    ap.add_argument("--lambda", dest="lambda_", type=float, default=4.0)
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--spp-boundary", type=int, default=16)
     ap.add_argument("--size", type=int, default=64)

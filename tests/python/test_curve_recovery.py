@@ -56,7 +56,7 @@ def test_centre_line_distance_is_zero_on_itself_and_a_shift_otherwise():
 
 def test_a_tuft_is_recovered_from_two_views():
     zero = os.environ.get("LIMN_CURVE_RECOVERY_ZERO_GRADIENT") == "1"
-    out = cr.run(iterations=40, size=32, views=2, curves=2, points=5, lr=0.02, lr_radius=0.004, spp=4,
+    out = cr.run(iterations=50, size=32, views=2, curves=2, points=5, lr=0.03, lr_radius=0.003, lambda_=4.0, spp=4,
                  spp_boundary=16, levels=3, target_spp=128, zero_gradient=zero)
     rows = out["rows"]
     first, last = rows[0], rows[-1]
