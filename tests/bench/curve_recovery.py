@@ -232,6 +232,17 @@ def main(argv=None):
         for r in rows[::step] + ([rows[-1]] if (len(rows) - 1) % step else []):
             f.write(f"| {r[0]} | {r[1]:.1f} | {r[2]:.3e} | {r[3]:.4f} | {r[4]:.4f} | {r[5]:.4f} |\n")
         f.write("\nThe last row is after the last step (loss from one render per view at the same spp).\n\n")
+        target, start, final, offsets = out["target"], out["start"], out["final"], out["offsets"]
+        k = np.arange(len(target)) - np.repeat(offsets, np.diff(list(offsets) + [len(target)]))
+        f.write("Error by control point along the curves (index 0 the held root; mean over the curves):\n\n"
+                "| index | position error, start | position error, result | radius, target | radius, result |\n"
+                "|---|---|---|---|---|\n")
+        for i in range(int(k.max()) + 1):
+            sel = k == i
+            e0 = np.linalg.norm(start[sel, :3] - target[sel, :3], axis=1).mean()
+            e1 = np.linalg.norm(final[sel, :3] - target[sel, :3], axis=1).mean()
+            f.write(f"| {i} | {e0:.4f} | {e1:.4f} | {target[sel, 3].mean():.4f} | {final[sel, 3].mean():.4f} |\n")
+        f.write("\n")
         f.write("![loss and geometric error against time](recovery_curves.png)\n\n")
         f.write("![rows: the 3 views; columns: target, start, result](recovery.png)\n")
     print(summary)
