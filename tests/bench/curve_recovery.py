@@ -137,7 +137,7 @@ def geometric_error(points, target, offsets):
 def run(iterations=100, size=64, views=3, curves=4, points=6, lr=0.03, lr_radius=0.003, lambda_=4.0, spp=4,
         spp_boundary=16, levels=4, target_spp=256, zero_gradient=False, seed=0, log=None):
     """Optimise from the start to the targets; returns a dict of rows (iteration, seconds, loss,
-    control-point RMS, centre-line distance, radius RMS), the images and the final points.
+    control-point RMS, centre-line distance, radius RMS, smallest radius), the images and the final points.
     zero_gradient: the gradient is replaced by zeros (the test's check that the recovery comes
     from the derivatives)."""
     target, start, offsets = tuft(curves, points)
@@ -156,7 +156,7 @@ def run(iterations=100, size=64, views=3, curves=4, points=6, lr=0.03, lr_radius
     rows = []
 
     def callback(it, loss, x):
-        rows.append((it, time.perf_counter() - t0, loss) + geometric_error(x, target, offsets))
+        rows.append((it, time.perf_counter() - t0, loss) + geometric_error(x, target, offsets) + (float(x[:, 3].min()),))
         if log and it % 10 == 0:
             log(f"it {it:4d}  {rows[-1][1]:7.1f} s  loss {loss:.4e}  cp {rows[-1][3]:.4f}  line {rows[-1][4]:.4f}  r {rows[-1][5]:.4f}")
 
@@ -172,7 +172,7 @@ def run(iterations=100, size=64, views=3, curves=4, points=6, lr=0.03, lr_radius
     end_images = [s.render(spp=64, seed=1) for s in scenes]
     rows.append((len(rows), time.perf_counter() - t0, float(np.mean([loss_fn(s.render(spp=spp, seed=12345), t)[0]
                                                                        for s, t in zip(scenes, targets)])))
-                + geometric_error(final, target, offsets))
+                + geometric_error(final, target, offsets) + (float(final[:, 3].min()),))
     return {"rows": rows, "diverged": result.diverged, "target": target, "start": start, "final": final,
             "offsets": offsets, "images": (targets, start_images, end_images)}
 
@@ -219,7 +219,8 @@ def main(argv=None):
     first, last = rows[0], rows[-1]
     summary = (f"loss {first[2]:.3e} -> {last[2]:.3e}, control-point RMS {first[3]:.4f} -> {last[3]:.4f} "
                f"({first[3] / last[3]:.1f}x), centre-line distance {first[4]:.4f} -> {last[4]:.4f} ({first[4] / last[4]:.1f}x), "
-               f"radius RMS {first[5]:.4f} -> {last[5]:.4f}, {last[1]:.0f} s")
+               f"radius RMS {first[5]:.4f} -> {last[5]:.4f}, smallest radius during the run {min(r[6] for r in rows):.4f} "
+               f"(clamp at {RADIUS_FLOOR}), {last[1]:.0f} s")
     with open(os.path.join(args.out, "recovery.md"), "w") as f:
         f.write("# Recovering a hair tuft from 3 views\n\n")
         cmd = (f"nice .venv/bin/python tests/bench/curve_recovery.py --iterations {args.iterations} --lr {args.lr} "
