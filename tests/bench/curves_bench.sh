@@ -15,6 +15,7 @@ cd "$(dirname "$0")/../.."
 PY=${PY:-.venv/bin/python}
 WHICH=${1:-all}
 [ $# -gt 0 ] && shift
+case "$WHICH" in coil|shadows|all) ;; *) echo "curves_bench.sh: first argument '$WHICH' must be coil, shadows or all" >&2; exit 2;; esac
 if [ "$WHICH" = coil ] || [ "$WHICH" = all ]; then
   nice "$PY" -m limn bench scenes/curves/coil_reflection.json --param coil.control_points --tangent x \
     --methods full,grid,grid10x,projective_grid,octree_untrained,octree --budgets 64 256 \
