@@ -19,11 +19,18 @@ from . import _core
 
 
 class Adam:
-    """Adam (Kingma and Ba 2015) on one array, updated in place."""
+    """Adam (Kingma and Ba 2015) on one array, updated in place. ``lr`` is a number or an array
+    that broadcasts to x (e.g. one rate per column: a fibre's radii move slower than its points)."""
 
-    def __init__(self, x: np.ndarray, lr: float = 1e-2, betas=(0.9, 0.999), eps: float = 1e-8):
-        if not (math.isfinite(lr) and lr > 0):
+    def __init__(self, x: np.ndarray, lr=1e-2, betas=(0.9, 0.999), eps: float = 1e-8):
+        lr_array = np.asarray(lr, dtype=np.float64)
+        if not (np.isfinite(lr_array).all() and (lr_array > 0).all()):
             raise ValueError(f"Adam: lr must be finite and > 0 (got {lr})")
+        try:
+            np.broadcast_to(lr_array, np.shape(x))
+        except ValueError:
+            raise ValueError(f"Adam: lr of shape {lr_array.shape} does not broadcast to the parameters' shape {np.shape(x)}") from None
+        lr = float(lr_array) if lr_array.ndim == 0 else lr_array
         betas = tuple(betas)
         if len(betas) != 2 or not all(math.isfinite(b) and 0.0 <= b < 1.0 for b in betas):
             raise ValueError(f"Adam: betas must be two numbers in [0, 1) (got {betas})")
@@ -53,7 +60,7 @@ class Adam:
         with np.errstate(over="ignore", invalid="ignore"):
             x = self.x - step.astype(self.x.dtype)
         if not np.isfinite(x).all():  # a finite float64 step beyond the parameters' type (lr 1e300, float32)
-            raise ValueError(f"Adam: the step (lr {self.lr:g}) takes the parameters beyond the range of {self.x.dtype}; lower lr")
+            raise ValueError(f"Adam: the step (lr {np.max(self.lr):g}) takes the parameters beyond the range of {self.x.dtype}; lower lr")
         self.t, self.m, self.v = self.t + 1, m, v
         self.x[...] = x
 
@@ -84,6 +91,21 @@ class LargeSteps:
     def gradient_u(self, grad_x) -> np.ndarray:
         """dLoss/du from dLoss/dx (M is symmetric: M^-T = M^-1)."""
         return self.from_u(grad_x)
+
+
+def curve_faces(offsets, point_count: int) -> np.ndarray:
+    """Degenerate triangles (i, i + 1, i + 1) for consecutive control points of each fibre curve
+    (``offsets``: the first point of each curve, as the scene's ``curve_offsets``): LargeSteps keeps
+    their unique edges, so its L is the path Laplacian along each curve and no edge joins two
+    curves (Large Steps on ``"<id>.control_points"``, the radius column smoothed as the positions)."""
+    starts = np.asarray(offsets, dtype=np.int64).ravel()
+    n = int(point_count)
+    if starts.size == 0 or starts[0] != 0 or (np.diff(starts) < 2).any() or starts[-1] > n - 2:
+        raise ValueError(f"curve_faces: offsets {starts.tolist()} must start at 0 and leave >= 2 points per curve "
+                         f"of the {n} points")
+    ends = np.append(starts[1:], n)
+    i = np.concatenate([np.arange(a, b - 1) for a, b in zip(starts, ends)])
+    return np.stack([i, i + 1, i + 1], 1).astype(np.int64)
 
 
 def l2(image: np.ndarray, target: np.ndarray):
@@ -126,7 +148,8 @@ def fit(views, name: str, iterations: int = 100, lr: float = 0.01, lambda_: floa
     A heightfield's ``"<id>.heights"`` (rows x columns) works the same way: ``faces`` from
     :func:`grid_faces`, ``mask`` of shape (rows * columns,) or (rows, columns).
     Fibre curves' ``"<id>.control_points"`` (N x 4: x, y, z, radius) are optimised as N rows
-    (``mask`` (N,) holds whole control points). ``project(x)`` (the parameter's shape in and out)
+    (``mask`` (N,) holds whole control points; ``faces`` from :func:`curve_faces` smooth along each
+    curve; ``lr`` may be per column, e.g. ``[lr, lr, lr, lr_radius]``). ``project(x)`` (the parameter's shape in and out)
     is applied after every step, before the scenes see it: a projection onto what the parameter
     may be (e.g. radii clamped above a floor); the optimiser continues from the projected point.
     ``gradient(g)`` (same shape) maps each iteration's gradient before the step: with a ``project``

@@ -1,6 +1,7 @@
 """Gradient error against run time: ``python3 -m limn bench scene.json --param NAME``.
 
-Renders the finite-difference reference once (cached on disk), then for each method and budget
+Renders the finite-difference reference once (two independent halves, whose difference measures the
+reference's own error), then for each method and budget
 times render_forward and records RMSE and MAE against the reference (relative to the reference's
 RMS). Writes <out>/<scene>.md (table, command, what was computed) and <out>/<scene>.png (plot)."""
 from __future__ import annotations
@@ -68,9 +69,14 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
     t = {param: default_tangent(scene.params[param], tangent)}
     scene.set_differentiable([param])
     t0 = time.perf_counter()
-    reference = fd(scene, t, eps=eps, spp=fd_spp, seed=seed + 12345)
+    # The reference as the mean of two independent halves (fd_spp / 2 each): half their difference
+    # estimates the reference's own error (the mean of two halves has the variance of one half / 2,
+    # the difference twice one half's), which bounds how small an RMSE against it can be measured.
+    halves = [fd(scene, t, eps=eps, spp=max(1, fd_spp // 2), seed=seed + 12345 + 7 * h).astype(np.float64) for h in (0, 1)]
+    reference = 0.5 * (halves[0] + halves[1])
     t_ref = time.perf_counter() - t0
-    ref_rms = float(np.sqrt((reference.astype(np.float64) ** 2).mean())) or 1.0
+    ref_rms = float(np.sqrt((reference ** 2).mean())) or 1.0
+    ref_noise = float(np.sqrt((0.25 * (halves[0] - halves[1]) ** 2).mean())) / ref_rms
     # Runs interleaved (for each budget and run, every method in turn): a shared machine's speed
     # drifts by tens of per cent over a bench, and every method should see the same drift.
     samples = {(m, b): [] for m in methods for b in budgets}
@@ -105,7 +111,8 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
     lines = [f"# Gradient error against run time: {name}", "",
              f"Regenerate: `{command}`", "",
              f"Parameter `{param}`, tangent `{tangent}`; reference: central differences, eps {eps}, {fd_spp} spp "
-             f"({t_ref:.1f} s, cached). Errors are relative to the reference's RMS. Film {scene.width}x{scene.height}; "
+             f"as two independent halves ({t_ref:.1f} s); the reference's own error (the pixel RMS of half the "
+             f"halves' difference, relative to its RMS): {ref_noise:.4f}, a floor under every relative RMSE below. Errors are relative to the reference's RMS. Film {scene.width}x{scene.height}; "
              f"budget = samples per pixel for every term computed. {runs} run(s) per row on a shared 2-core machine "
              f"(seeds differ; for each budget and run every method in turn, so that they share the machine's drift); time includes building the guide (in every call: guide_refresh=0).", "",
              "Methods: `full` uniform boundary sampling; `grid` / `grid10x` the path-space baseline grid with 4 / 40 "
@@ -139,6 +146,7 @@ def run(scene_path: str, param: str, methods: list[str], budgets: list[int], fd_
             for m in methods:
                 pts = [(r[2], r[col]) for r in rows if r[0] == m]
                 ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=m)
+            ax.axhline(ref_noise, color="grey", ls="--", lw=1, label="FD reference's own error")
             ax.set_xlabel("render_forward time (s)")
             ax.set_ylabel(label)
             ax.set_title(f"{name}: {label}")
