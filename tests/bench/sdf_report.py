@@ -324,8 +324,9 @@ def main():
                 f" (sections {', '.join(k for k in SECTIONS if k in new)} on {stamp}" +
                 (", the others earlier" if set(old) - set(new) else "") + ");",
                 "2-core machine shared with other work (timings are indicative). What the numbers say, and what is",
-                "still open (the lit ball's sums, the 64^3 area light at 512 samples): docs/derivatives.md, \"Known gaps\";",
-                "docs/sdf.md. `python3 tests/bench/sdf_report.py --only 4,5` regenerates those sections alone.", ""]
+                "still open (the lit ball's sums, the 64^3 area light at 512 samples, the 64^3 point-light shadow of section 6,",
+                "the heavy-tailed perimeter estimates in section 5's reflection): docs/derivatives.md, \"Known gaps\"; docs/sdf.md.",
+                "`python3 tests/bench/sdf_report.py --only 4,5` regenerates those sections alone.", ""]
         with open(path, "w") as f:
             f.write("\n".join(head) + "\n" + "".join(secs[k] for k in SECTIONS if k in secs))
 
