@@ -12,8 +12,12 @@
    camera does not see the SDF, so the interior term is zero).
 3. The projection operator: how many seed segments project onto silhouettes (interior patch,
    crease, fallback), from the guides' own counters.
-4. Voxel BVH (Embree user primitives) build time and primitive counts, and one backward pass, at
-   64^3, 128^3, 256^3.
+4. Voxel BVH (Embree user primitives) build time, primitive counts and memory, and one backward
+   pass, at 64^3, 128^3, 256^3 (each size in its own process).
+5., 6. The paper's Figure 17 (tests/bench/sdf_fig17.py): the perimeter and interior parts of Eq. 4
+   against FD for an SDF seen in the reflection test scene and for its shadow, 64^3 and 128^3.
+
+`--only 4,5,6` regenerates those sections and keeps the others of the existing README.
 """
 from __future__ import annotations
 
@@ -31,6 +35,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 sys.path.insert(0, os.path.join(ROOT, "tests", "python"))
 from test_derivatives import block_z  # noqa: E402
 from test_sdfgrid import ball, shadow_scene, sky_scene, sdf  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import sdf_fig17  # noqa: E402
 
 OUT = os.path.join(ROOT, "docs", "reports", "sdf")
 QUICK = "--quick" in sys.argv
@@ -181,50 +187,152 @@ def projection_stats(lines):
               "check is a true silhouette (the line along w beside x_b meets the surface on one side only).", ""]
 
 
+def _status_kib(field):
+    with open("/proc/self/status") as f:
+        return next(int(l.split()[1]) for l in f if l.startswith(field + ":"))
+
+
+def _reset_peak():
+    """Linux: writing 5 to clear_refs resets VmHWM to the current RSS (proc(5))."""
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+
+
+def bvh_child(n):
+    """One size of section 4 in a fresh process (so peaks and caches of other sizes do not count):
+    times and memory (RSS, VmHWM from /proc/self/status) as JSON on stdout."""
+    d = sky_scene(sdf(ball(n)), spp=4)
+    d["sensor"]["film"] = {"type": "hdrfilm", "width": 32, "height": 32}
+    d["lamp"] = {"type": "rectangle", "to_world": [{"scale": 0.5}, {"rotate": {"axis": [1, 0, 0], "angle": 180}}, {"translate": [0.5, -0.5, 3]}],
+                 "emitter": {"type": "area", "radiance": 10.0}}
+    data = d["obj"]["data"]
+    # limn's own per-voxel arrays, exactly: values and built_values (float32 per sample) and one
+    # 32-byte Prim (uint32 voxel, uint8 axis + 3 padding, 6 floats) per voxel the surface can pass
+    # through (SdfGrid::straddles: min <= 0 <= max over the 8 corners, not all zero).
+    c = [data[z:z + n - 1, y:y + n - 1, x:x + n - 1] for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+    lo, hi = np.minimum.reduce(c), np.maximum.reduce(c)
+    prims = int(((lo <= 0) & (hi >= 0) & ~((lo == 0) & (hi == 0))).sum())
+    del c, lo, hi
+    import gc
+    gc.collect()
+    _reset_peak()
+    rss0 = _status_kib("VmRSS")
+    t0 = time.time()
+    scene = limn.load_dict(d)
+    t_load = time.time() - t0
+    load_peak, load_kept = _status_kib("VmHWM") - rss0, _status_kib("VmRSS") - rss0
+    name = "obj.data"
+    v = scene.params[name].copy()
+    scene.params[name] = v - 1e-3
+    t0 = time.time()
+    scene.update()
+    t_update = time.time() - t0
+    scene.set_differentiable([name])
+    _reset_peak()
+    rss1 = _status_kib("VmRSS")
+    t0 = time.time()
+    quiet(scene.render_backward, np.ones((32, 32, 3), np.float32), spp=4, spp_boundary=16, seed=0)
+    t_bwd = time.time() - t0
+    bwd_peak = _status_kib("VmHWM") - rss1
+    summary = next((l for l in scene.last_stats["summary"] if l.startswith("indirect boundary")), "")
+    import re
+    m = re.search(r"over (\d+) SDF voxels and creases", summary)
+    print(json.dumps(dict(n=n, segments=int(m.group(1)) if m else -1, prims=prims, own_bytes=8 * n ** 3 + 32 * prims,
+                          t_load=t_load, t_update=t_update, t_bwd=t_bwd, load_peak_kib=load_peak, load_kept_kib=load_kept,
+                          bwd_peak_kib=bwd_peak)))
+
+
 def bvh_and_backward(lines):
+    import subprocess
     lines += ["## 4. Voxel BVH and one backward pass", "",
-              "The bumpy ball at n^3 samples, 32 x 32 px, area light, spp 4, spp_boundary 16 (uniform).", "",
-              "| grid | boundary segments (surface voxels + creases) | load + BVH build (s) | update after changing every value (s) | backward pass (s) |",
-              "|---|---|---|---|---|"]
+              "The bumpy ball at n^3 samples, 32 x 32 px, area light, spp 4, spp_boundary 16 (uniform). Each size",
+              "in a fresh process. Memory: the process's resident set (/proc/self/status) around the call, with the",
+              "peak (VmHWM) reset just before it (`echo 5 > /proc/self/clear_refs`), so the peak is the call's own",
+              "high-water mark above what was resident before (the input array, Python, limn's module). `kept`: RSS",
+              "after the load minus before: the scene as it stays (grid values twice, the prims, Embree's BVH, the",
+              "rest of the scene). `limn's arrays`: the exact size of the grid's own vectors (values and built_values,",
+              "4 bytes per sample each, and one 32-byte Prim per voxel the surface can pass through); Embree 3 has",
+              "no query for its BVH's size, so Embree's share is in `kept` only (kept minus limn's arrays is an",
+              "upper bound on it and the rest of the scene, allocator slack included).", "",
+              "| grid | boundary segments (surface voxels + creases) | voxel prims | load + BVH build (s) | update after changing every value (s) | backward pass (s) | limn's arrays (MiB) | load: peak / kept (MiB) | backward: peak (MiB) |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for n in ((32, 64) if QUICK else (64, 128, 256)):
-        d = sky_scene(sdf(ball(n)), spp=4)
-        d["sensor"]["film"] = {"type": "hdrfilm", "width": 32, "height": 32}
-        d["lamp"] = {"type": "rectangle", "to_world": [{"scale": 0.5}, {"rotate": {"axis": [1, 0, 0], "angle": 180}}, {"translate": [0.5, -0.5, 3]}],
-                     "emitter": {"type": "area", "radiance": 10.0}}
-        t0 = time.time()
-        scene = limn.load_dict(d)
-        t_load = time.time() - t0
-        name = "obj.data"
-        v = scene.params[name].copy()
-        scene.params[name] = v - 1e-3
-        t0 = time.time()
-        scene.update()
-        t_update = time.time() - t0
-        scene.set_differentiable([name])
-        t0 = time.time()
-        quiet(scene.render_backward, np.ones((32, 32, 3), np.float32), spp=4, spp_boundary=16, seed=0)
-        t_bwd = time.time() - t0
-        voxels = int(((ball(n)[:-1, :-1, :-1] <= 0) != (ball(n)[1:, 1:, 1:] <= 0)).sum())  # rough: diagonal sign changes
-        summary = next((l for l in scene.last_stats["summary"] if l.startswith("indirect boundary")), "")
-        import re
-        m = re.search(r"over (\d+) SDF voxels and creases", summary)
-        lines.append(f"| {n}^3 | {m.group(1) if m else voxels} | {t_load:.2f} | {t_update:.2f} | {t_bwd:.2f} |")
+        out = subprocess.run([sys.executable, os.path.abspath(__file__), "--bvh-child", str(n)], check=True,
+                             capture_output=True, text=True).stdout
+        r = json.loads(out.strip().splitlines()[-1])
+        mib = lambda kib: kib / 1024  # noqa: E731
+        lines.append(f"| {n}^3 | {r['segments']} | {r['prims']} | {r['t_load']:.2f} | {r['t_update']:.2f} | {r['t_bwd']:.2f} | "
+                     f"{r['own_bytes'] / 2 ** 20:.1f} | {mib(r['load_peak_kib']):.1f} / {mib(r['load_kept_kib']):.1f} | "
+                     f"{mib(r['bwd_peak_kib']):.1f} |")
         print(lines[-1], flush=True)
     lines.append("")
 
 
+def fig17_reflection(lines):
+    sdf_fig17.section(lines, "reflection", (16,) if QUICK else (64, 128), 4 if QUICK else 8, OUT,
+                      "## 5. Figure 17 (a): an SDF seen in the reflection test scene, perimeter and interior parts",
+                      "The projective-sampling paper's test scene (scenes/projective/make.py `base`: a GGX alpha = 0.005\n"
+                      "conductor plane before a large emitter) with the bumpy ball as an `sdfgrid` in place of its sphere\n"
+                      "(radius 0.25), the camera zoomed onto the reflection (32 x 32 px, fov 14): the SDF is seen only in the\n"
+                      "plane, so the derivative image is the indirect boundary term (and a small interior term: the\n"
+                      "reflected SDF is lit by the emitter's light off the plane).")
+
+
+def fig17_shadow(lines):
+    sdf_fig17.section(lines, "shadow", (16,) if QUICK else (64, 128), 4 if QUICK else 8, OUT,
+                      "## 6. Figure 17 (b): an SDF casting a shadow, perimeter and interior parts",
+                      "Section 1's point-light shadow scene (tests/python/test_sdfgrid.py `shadow_scene`: the camera sees\n"
+                      "the floor only, so the derivative image is the indirect boundary term alone) at 64^3 and 128^3.")
+
+
+SECTIONS = {"1": fd_agreement, "1b": parts_agreement, "2": error_vs_time, "3": projection_stats, "4": bvh_and_backward,
+            "5": fig17_reflection, "6": fig17_shadow}
+
+
+def split_sections(text):
+    """The README's header and its sections by number ("## 1b. ..." -> "1b")."""
+    import re
+    parts = re.split(r"(?m)^(?=## )", text)
+    head, secs = parts[0], {}
+    for p in parts[1:]:
+        secs[re.match(r"## (\w+)\.", p).group(1)] = p
+    return head, secs
+
+
 def main():
+    """`--only 4,5` regenerates those sections and keeps the others of the existing README."""
     os.makedirs(OUT, exist_ok=True)
-    lines = ["# Signed-distance grids (`sdfgrid`): measurements", "",
-             "Generated by `tests/bench/sdf_report.py`" + (" --quick" if QUICK else "") + f" on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())};",
-             "2-core machine shared with other work (timings are indicative). What the numbers say, and what is",
-             "still open (the lit ball's sums, the 64^3 area light at 512 samples): docs/derivatives.md, \"Known gaps\";",
-             "docs/sdf.md.", ""]
-    for part in (fd_agreement, parts_agreement, error_vs_time, projection_stats, bvh_and_backward):
-        part(lines)
-        with open(os.path.join(OUT, "README.md" if not QUICK else "quick.md"), "w") as f:
-            f.write("\n".join(lines) + "\n")
+    only = sys.argv[sys.argv.index("--only") + 1].split(",") if "--only" in sys.argv else list(SECTIONS)
+    path = os.path.join(OUT, "README.md" if not QUICK else "quick.md")
+    old = {}
+    if "--only" in sys.argv and os.path.exists(path):
+        old = split_sections(open(path).read())[1]
+    load0 = os.getloadavg()
+    stamp = time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())
+    new = {}
+    for key, part in SECTIONS.items():
+        if key not in only:
+            continue
+        sec = []
+        t0 = time.time()
+        part(sec)
+        new[key] = "\n".join(sec) + "\n" + (f"(Section generated {stamp} in {time.time() - t0:.0f} s; machine load average "
+                                             f"{load0[0]:.1f} at the start, {os.getloadavg()[0]:.1f} at the end.)\n\n")
+        secs = {**old, **new}
+        head = ["# Signed-distance grids (`sdfgrid`): measurements", "",
+                "Generated by `tests/bench/sdf_report.py`" + (" --quick" if QUICK else "") +
+                f" (sections {', '.join(k for k in SECTIONS if k in new)} on {stamp}" +
+                (", the others earlier" if set(old) - set(new) else "") + ");",
+                "2-core machine shared with other work (timings are indicative). What the numbers say, and what is",
+                "still open (the lit ball's sums, the 64^3 area light at 512 samples, the 64^3 point-light shadow of section 6,",
+                "the heavy-tailed perimeter estimates in section 5's reflection): docs/derivatives.md, \"Known gaps\"; docs/sdf.md.",
+                "`python3 tests/bench/sdf_report.py --only 4,5` regenerates those sections alone.", ""]
+        with open(path, "w") as f:
+            f.write("\n".join(head) + "\n" + "".join(secs[k] for k in SECTIONS if k in secs))
 
 
 if __name__ == "__main__":
-    main()
+    if "--bvh-child" in sys.argv:
+        bvh_child(int(sys.argv[sys.argv.index("--bvh-child") + 1]))
+    else:
+        main()
