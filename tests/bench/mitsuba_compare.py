@@ -85,15 +85,19 @@ def bsdf(d: dict) -> dict:
     raise ValueError(d["type"])
 
 
+def mitsuba_sensor(mi, s: dict) -> dict:
+    """limn's perspective sensor as Mitsuba's (box filter, as limn's pixels)."""
+    return {"type": "perspective", "fov": s["fov"], "to_world": transform(mi, s["to_world"]),
+            "film": {"type": "hdrfilm", "width": s["film"]["width"], "height": s["film"]["height"],
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "sampler": {"type": "independent", "sample_count": 4}}
+
+
 def mitsuba_scene(mi, desc: dict, guiding: str) -> dict:
     # sppc/sppp/sppi unset: each call's spp sets all three (Mitsuba's override_spp).
-    s = desc["sensor"]
     out = {"type": "scene",
            "integrator": {"type": "prb_projective", "max_depth": desc["integrator"]["max_depth"], "guiding": guiding},
-           "sensor": {"type": "perspective", "fov": s["fov"], "to_world": transform(mi, s["to_world"]),
-                      "film": {"type": "hdrfilm", "width": s["film"]["width"], "height": s["film"]["height"],
-                               "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-                      "sampler": {"type": "independent", "sample_count": 4}}}
+           "sensor": mitsuba_sensor(mi, desc["sensor"])}
     for key in ("plane", "emitter", "shape"):
         sh = desc[key]
         m = {"type": sh["type"], "bsdf": bsdf(sh["bsdf"])}
@@ -162,10 +166,11 @@ def interleaved(out: dict, run_limn, run_mi, budgets: list[int], runs: int, tag:
     """The timed calls by the project's rules: limn's warm-up once, Mitsuba's once per budget (Dr.Jit
     compiles per call shape), then ``runs`` runs per budget with seeds 7, 107, 207 ..., the two
     renderers back to back in alternating order. run_limn / run_mi(budget, seed) -> (seconds, error);
-    run_mi None: limn alone. Fills out["runs"] and out["warmup"]."""
+    either None: the other alone. Fills out["runs"] and out["warmup"]."""
     out.setdefault("runs", {"limn": {}, "mitsuba": {}})
     out.setdefault("warmup", {"limn": {}, "mitsuba": {}})
-    out["warmup"]["limn"][str(budgets[0])] = run_limn(budgets[0], 999)[0]
+    if run_limn is not None:
+        out["warmup"]["limn"][str(budgets[0])] = run_limn(budgets[0], 999)[0]
     for b in budgets:
         if run_mi is not None:
             out["warmup"]["mitsuba"][str(b)] = run_mi(b, 999)[0]  # compiles this budget's kernels
@@ -174,11 +179,12 @@ def interleaved(out: dict, run_limn, run_mi, budgets: list[int], runs: int, tag:
             seed = 7 + 100 * r
             order = (("limn", "mitsuba") if r % 2 == 0 else ("mitsuba", "limn"))
             for who in order:
-                if who == "limn":
+                if who == "limn" and run_limn is not None:
                     L.append(run_limn(b, seed))
-                elif run_mi is not None:
+                elif who == "mitsuba" and run_mi is not None:
                     M.append(run_mi(b, seed))
-        out["runs"]["limn"][str(b)] = L
+        if run_limn is not None:
+            out["runs"]["limn"][str(b)] = L
         if run_mi is not None:
             out["runs"]["mitsuba"][str(b)] = M
         print(f"# {tag} {b} spp: limn {L}, mitsuba {M}", file=sys.stderr, flush=True)
@@ -462,6 +468,20 @@ def report(out_path: str, data_dir: str, command: str):
     print("wrote", out_path)
 
 
+def run_worker(base: list[str], guiding: str, data: dict):
+    """Runs a worker process (a Dr.Jit compiler failure aborts it); on failure again with --no-mitsuba
+    (limn alone), the failure noted in data["failures"]. Its RESULT dict, or None."""
+    for cmd in (base, base + ["--no-mitsuba"]):
+        res = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True)
+        out = [l[l.index("RESULT ") + 7:] for l in res.stdout.splitlines() if "RESULT " in l]
+        if res.returncode == 0 and out:
+            return json.loads(out[-1])
+        err = [l for l in res.stdout.splitlines() if "error" in l.lower() or "failure" in l.lower()]
+        data["failures"].append(f"Mitsuba with guiding '{guiding}' failed (exit {res.returncode}): "
+                                f"{(err or ['no output'])[0].strip()[:200]}; limn alone")
+    return None
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenes", nargs="+", default=["sphere", "torus", "bunny"])
@@ -506,19 +526,12 @@ def main() -> int:
             base = [sys.executable, os.path.abspath(__file__), "--worker", name, guiding, "--runs", str(args.runs),
                     "--budgets", *map(str, args.budgets)] + (["--primal"] if "primal_ratio" not in data else [])
             # Each guiding in a process of its own: a Dr.Jit compiler failure aborts it; limn alone then.
-            for cmd in (base, base + ["--no-mitsuba"]):
-                res = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True)
-                out = [l[l.index("RESULT ") + 7:] for l in res.stdout.splitlines() if "RESULT " in l]
-                if res.returncode == 0 and out:
-                    r = json.loads(out[-1])
-                    for k in ("primal_ratio", "primal_diff"):
-                        if k in r:
-                            data[k] = r[k]
-                    data["configs"][guiding] = r
-                    break
-                err = [l for l in res.stdout.splitlines() if "error" in l.lower() or "failure" in l.lower()]
-                data["failures"].append(f"Mitsuba with guiding '{guiding}' failed (exit {res.returncode}): "
-                                        f"{(err or ['no output'])[0].strip()[:200]}; limn alone")
+            r = run_worker(base, guiding, data)
+            if r is not None:
+                for k in ("primal_ratio", "primal_diff"):
+                    if k in r:
+                        data[k] = r[k]
+                data["configs"][guiding] = r
             with open(os.path.join(data_dir, name + ".json"), "w") as f:  # partial results survive an interruption
                 json.dump(data, f, indent=1)
         with open(os.path.join(data_dir, name + ".json"), "w") as f:
