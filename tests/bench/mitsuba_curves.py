@@ -402,8 +402,9 @@ def figure(datas: dict, png: str, top: int):
 
 def region_table(n: str, d: dict) -> list[str]:
     rs = d.get("regions")
+    notes = [f"- {m}" for m in d.get("notes", [])] + ([""] if d.get("notes") else [])
     if not rs:
-        return []
+        return notes
     top = d["budgets"][-1]
     lines = [f"Derivative images at {top} spp, mean over the {d['runs']} runs, against the reference per region "
              "(relative RMSE in the region; sum of the derivative over the region; the whole image's sum). "
@@ -421,7 +422,7 @@ def region_table(n: str, d: dict) -> list[str]:
         name = f"limn {mc.LIMN_LABEL.get(g, g)}" if who == "limn" else f"Mitsuba {g}"
         lines.append(f"| {name} | {e['joints']:.3f} | {e['ends']:.3f} | {e['rest']:.3f} | {e['sum_joints']:.3g} | "
                      f"{e['sum_ends']:.3g} | {e['sum_rest']:.3g} | {e['sum']:.3g} |")
-    return lines + [""]
+    return notes + lines + [""]
 
 
 def report(out_path: str, data_dir: str, command: str):
@@ -509,6 +510,8 @@ def main() -> int:
     ap.add_argument("--worker", nargs=2, metavar=("SCENE", "GUIDING"), help=argparse.SUPPRESS)
     ap.add_argument("--no-mitsuba", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--no-limn", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--merge-worker", nargs=2, metavar=("SCENE", "OUTPUT"),
+                    help="merge the RESULT line of a worker run by hand (--worker SCENE GUIDING ...) into SCENE's data")
     args = ap.parse_args()
     os.makedirs(WORK, exist_ok=True)
     if args.worker:
@@ -517,6 +520,23 @@ def main() -> int:
         ap.error("--runs must be at least 3 (the project's measurement rules)")
     args.data_dir = os.path.join(os.path.dirname(args.out), "mitsuba_data")
     command = "nice .venv/bin/python tests/bench/mitsuba_curves.py " + " ".join(a for a in sys.argv[1:] if a != "--report-only")
+    if args.merge_worker:
+        name, output = args.merge_worker
+        with open(output) as f:
+            (r,) = [json.loads(l[l.index("RESULT ") + 7:]) for l in f if "RESULT " in l][-1:]
+        path = os.path.join(args.data_dir, name + ".json")
+        with open(path) as f:
+            data = json.load(f)
+        g = r["guiding"]
+        data["failures"] = [m for m in data["failures"] if f"guiding '{g}'" not in m]
+        data["configs"][g] = r
+        data.setdefault("notes", []).append(
+            f"guiding '{g}' ({', '.join(w for w in ('limn', 'mitsuba') if r['runs'][w])}) ran in a separate worker process "
+            "alongside the others, for time (same code: --worker)")
+        with open(path, "w") as f:
+            json.dump(data, f, indent=1)
+        print("merged", g, "into", path)
+        return 0
     if args.report_only:
         report(args.out, args.data_dir, command.strip())
         return 0
