@@ -22,7 +22,7 @@ budget (mean over the runs) are compared with the reference per region: pixels w
 an interior span joint is seen (directly, in the mirror, or as a shadow), pixels near the open ends,
 and the rest; and the sum of each derivative image against the reference's.
 
-Regenerate (about 25 min on 2 shared cores):
+Regenerate (the scenes can run side by side, `--scenes S` each; 50-60 min per scene at a load average of 25 on 2 cores):
     nice .venv/bin/python tests/bench/mitsuba_curves.py
 """
 from __future__ import annotations
@@ -285,11 +285,13 @@ def region_stats(name: str, desc: dict, P: np.ndarray, ref: np.ndarray, a: np.nd
         out["ref_sum"][k] = float(ref[m].sum())
         out["ref_noise"][k] = float(np.sqrt(((a - b)[m] ** 2).mean()) / 2 / max(np.sqrt((ref[m] ** 2).mean()), 1e-30))
     out["ref_sum"]["all"] = float(ref.sum())
+    out["ref_sum"]["all_noise"] = float(abs(a.sum() - b.sum()) / 2)  # one draw of the mean's noise: rough
     for f in sorted(os.listdir(WORK)):
         if f.startswith(name + "_") and f.endswith("_mean.npy"):
             label = f[len(name) + 1:-9]
             img = np.load(os.path.join(WORK, f))
-            e = {"sum": float(img.sum())}
+            e = {"sum": float(img.sum()), "scale": float((img * ref).sum() / (ref * ref).sum()),
+                 "corr": float(np.corrcoef(img.ravel(), ref.ravel())[0, 1])}
             for k, m in R.items():
                 e[k] = float(np.sqrt(((img - ref)[m] ** 2).mean()) / max(np.sqrt((ref[m] ** 2).mean()), 1e-30))
                 e["sum_" + k] = float(img[m].sum())
@@ -409,19 +411,19 @@ def region_table(n: str, d: dict) -> list[str]:
     lines = [f"Derivative images at {top} spp, mean over the {d['runs']} runs, against the reference per region "
              "(relative RMSE in the region; sum of the derivative over the region; the whole image's sum). "
              "Regions: pixels where the tube within 0.1 span of an interior span joint is seen "
-             + ("(in the mirror)" if n == "coil_reflection" else "(directly or as a shadow)" if "lamp" in n or "shadow" in n else "")
+             + ("(in the mirror)" if n == "coil_reflection" else "(directly or as a shadow)" if "shadow" in n else "(directly)")
              + f"; within 0.15 span of an open end; the rest. Pixels: joints {rs['pixels']['joints']}, ends "
              f"{rs['pixels']['ends']}, rest {rs['pixels']['rest']}.", "",
-             "| image | joints: rel. RMSE | ends: rel. RMSE | rest: rel. RMSE | sum joints | sum ends | sum rest | sum all |",
-             "|---|---|---|---|---|---|---|---|",
+             "| image | joints: rel. RMSE | ends: rel. RMSE | rest: rel. RMSE | sum joints | sum ends | sum rest | sum all | least-squares scale to the reference, correlation |",
+             "|---|---|---|---|---|---|---|---|---|",
              f"| reference (its own noise) | ({rs['ref_noise']['joints']:.3f}) | ({rs['ref_noise']['ends']:.3f}) | "
              f"({rs['ref_noise']['rest']:.3f}) | {rs['ref_sum']['joints']:.3g} | {rs['ref_sum']['ends']:.3g} | "
-             f"{rs['ref_sum']['rest']:.3g} | {rs['ref_sum']['all']:.3g} |"]
+             f"{rs['ref_sum']['rest']:.3g} | {rs['ref_sum']['all']:.3g} ± {rs['ref_sum'].get('all_noise', float('nan')):.2g} | 1, 1 |"]
     for label, e in sorted(rs["images"].items()):
         g, who = label.rsplit("_", 1)
         name = f"limn {mc.LIMN_LABEL.get(g, g)}" if who == "limn" else f"Mitsuba {g}"
         lines.append(f"| {name} | {e['joints']:.3f} | {e['ends']:.3f} | {e['rest']:.3f} | {e['sum_joints']:.3g} | "
-                     f"{e['sum_ends']:.3g} | {e['sum_rest']:.3g} | {e['sum']:.3g} |")
+                     f"{e['sum_ends']:.3g} | {e['sum_rest']:.3g} | {e['sum']:.3g} | {e['scale']:.3f}, {e['corr']:.3f} |")
     return notes + lines + [""]
 
 
@@ -442,8 +444,10 @@ def report(out_path: str, data_dir: str, command: str):
     any_d = next(iter(datas.values()))
     out_dir = os.path.dirname(out_path)
     lines = ["# limn and Mitsuba 3 on fibre curves (`bsplinecurve`)", "",
-             f"Regenerate: `{command}` (about 25 min on 2 shared cores; `--report-only` rewrites this page "
-             "from mitsuba_data/ and the images left in " + WORK + ").", "",
+             f"Regenerate: `{command}` (`--scenes S` runs one scene: the three can run side by side; "
+             "`--report-only` rewrites this page from mitsuba_data/ and the images left in " + WORK + "). "
+             "Time per scene here: " + ", ".join(f"{n} {d['seconds'] / 60:.0f} min" for n, d in datas.items() if "seconds" in d)
+             + " (with the machine's load below; on an idle machine a fraction of that).", "",
              f"Mitsuba {any_d['mitsuba_version']} (`llvm_ad_rgb`, `prb_projective`, forward mode) and limn on "
              f"{any_d['machine']}, {any_d['date']}, load average {any_d.get('load', '?')} at the start of each "
              "scene on 2 cores shared with other engineers' builds and tests: absolute times are slower than an "
@@ -497,11 +501,11 @@ def report(out_path: str, data_dir: str, command: str):
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scenes", nargs="+", default=ORDER)
-    ap.add_argument("--budgets", type=int, nargs="+", default=[16, 64, 256], help="both renderers'")
+    ap.add_argument("--budgets", type=int, nargs="+", default=[16, 256], help="both renderers'")
     ap.add_argument("--limn-guidings", nargs="+", default=["auto", "grid"], choices=["auto", "octree", "grid", "none"])
     ap.add_argument("--mitsuba-guidings", nargs="+", choices=["octree", "grid", "none"],
                     help="for every scene (default: MITSUBA_PLAN, per scene)")
-    ap.add_argument("--fd-spp", type=int, default=16384, help="limn's reference, both halves together")
+    ap.add_argument("--fd-spp", type=int, default=8192, help="limn's reference, both halves together")
     ap.add_argument("--mi-fd-spp", type=int, default=4096, help="Mitsuba's own FD, both halves together")
     ap.add_argument("--eps", type=float, default=FD_EPS)
     ap.add_argument("--runs", type=int, default=3)
