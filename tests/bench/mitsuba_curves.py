@@ -191,6 +191,7 @@ def worker(name: str, guiding: str, budgets: list[int], runs: int, with_limn: bo
         return timed("mitsuba", lambda: peer.gradient(b, seed), b)
 
     mc.interleaved(out, run_limn if with_limn else None, run_mi if peer is not None else None, budgets, runs, f"{name} {guiding}")
+    out["top_sums"] = {who: [float(i.sum()) for i in imgs[-runs:]] for who, imgs in top.items()}
     for who, imgs in top.items():
         if imgs:  # the warm-up call at the top budget is not among them: seeds 7, 107, ... only
             np.save(os.path.join(WORK, f"{name}_{guiding}_{who}_mean.npy"), np.mean(imgs[-runs:], axis=0))
@@ -421,9 +422,13 @@ def region_table(n: str, d: dict) -> list[str]:
              f"{rs['ref_sum']['rest']:.3g} | {rs['ref_sum']['all']:.3g} ± {rs['ref_sum'].get('all_noise', float('nan')):.2g} | 1, 1 |"]
     for label, e in sorted(rs["images"].items()):
         g, who = label.rsplit("_", 1)
+        sums = d["configs"].get(g, {}).get("top_sums", {}).get(who, [])
+        if len(sums) > 1:  # the mean image's sum with the standard error over the runs
+            e["sum"] = f"{np.mean(sums):.3g} ± {np.std(sums, ddof=1) / np.sqrt(len(sums)):.2g}"
         name = f"limn {mc.LIMN_LABEL.get(g, g)}" if who == "limn" else f"Mitsuba {g}"
         lines.append(f"| {name} | {e['joints']:.3f} | {e['ends']:.3f} | {e['rest']:.3f} | {e['sum_joints']:.3g} | "
-                     f"{e['sum_ends']:.3g} | {e['sum_rest']:.3g} | {e['sum']:.3g} | {e['scale']:.3f}, {e['corr']:.3f} |")
+                     f"{e['sum_ends']:.3g} | {e['sum_rest']:.3g} | {e['sum'] if isinstance(e['sum'], str) else format(e['sum'], '.3g')} | "
+                     f"{e['scale']:.3f}, {e['corr']:.3f} |")
     return notes + lines + [""]
 
 
