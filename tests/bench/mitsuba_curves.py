@@ -177,9 +177,11 @@ def worker(name: str, guiding: str, budgets: list[int], runs: int, with_limn: bo
         t0 = time.perf_counter()
         img = fn()
         s = time.perf_counter() - t0
-        if not np.isfinite(img).all():
-            print(f"# {name} {guiding} {who} {b} spp: non-finite pixels", file=sys.stderr, flush=True)
-            img = np.nan_to_num(img)
+        if not np.isfinite(img).all():  # counted and reported; the error is taken with them set to 0
+            k = int((~np.isfinite(img)).sum())
+            print(f"# {name} {guiding} {who} {b} spp: {k} non-finite pixel values", file=sys.stderr, flush=True)
+            out.setdefault("nonfinite", []).append([who, b, k])
+            img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
         if b == budgets[-1]:
             top[who].append(img)
         return s, float(np.sqrt(((img - ref) ** 2).mean()) / rms)
@@ -405,7 +407,12 @@ def figure(datas: dict, png: str, top: int):
 
 def region_table(n: str, d: dict) -> list[str]:
     rs = d.get("regions")
-    notes = [f"- {m}" for m in d.get("notes", [])] + ([""] if d.get("notes") else [])
+    notes = [f"- {m}" for m in d.get("notes", [])]
+    for g, c in d.get("configs", {}).items():
+        for who, b, k in c.get("nonfinite", []):
+            notes.append(f"- {'limn' if who == 'limn' else 'Mitsuba'} {g} at {b} spp: {k} NaN/Inf pixel values in one call "
+                         "(set to 0 for the error)")
+    notes += [""] if notes else []
     if not rs:
         return notes
     top = d["budgets"][-1]
