@@ -166,7 +166,8 @@ class CurvePeer:
 def worker(name: str, guiding: str, budgets: list[int], runs: int, with_limn: bool, with_mitsuba: bool) -> int:
     """One guiding, the renderers that run it interleaved; prints one JSON line and saves each
     renderer's mean derivative image at the largest budget."""
-    desc, scene, tangent = limn_scene(name)
+    # limn is not loaded for Mitsuba alone (two Embree copies in one process are not needed then)
+    desc, scene, tangent = limn_scene(name) if with_limn else (limn_desc(name), None, None)
     ref = np.load(os.path.join(WORK, f"{name}_reference.npy"))
     rms = float(np.sqrt((ref ** 2).mean()))
     peer = CurvePeer(desc, guiding) if with_mitsuba else None
@@ -545,10 +546,17 @@ def main() -> int:
             data = json.load(f)
         g = r["guiding"]
         data["failures"] = [m for m in data["failures"] if f"guiding '{g}'" not in m]
+        old = data["configs"].get(g)
+        if old is not None:  # the renderers this run did not run keep their rows
+            for key in ("runs", "warmup", "top_sums"):
+                for w in ("limn", "mitsuba"):
+                    if not r.get(key, {}).get(w) and old.get(key, {}).get(w):
+                        r.setdefault(key, {})[w] = old[key][w]
+            r["nonfinite"] = old.get("nonfinite", []) + r.get("nonfinite", [])
         data["configs"][g] = r
         data.setdefault("notes", []).append(
             f"guiding '{g}' ({', '.join(w for w in ('limn', 'mitsuba') if r['runs'][w])}) ran in a separate worker process "
-            "alongside the others, for time (same code: --worker)")
+            "at the same time as the other renderer's calls (not interleaved with them), for time (same code: --worker)")
         with open(path, "w") as f:
             json.dump(data, f, indent=1)
         print("merged", g, "into", path)
