@@ -374,30 +374,37 @@ def figure(datas: dict, png: str, top: int):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    cols = [("primal (limn)", None), ("FD reference (limn)", "reference"), ("limn auto", "auto_limn"),
-            ("limn octree", "octree_limn"), ("Mitsuba octree", "octree_mitsuba"), ("Mitsuba's FD", "mifd")]
+    cols = ["primal (limn)", "FD reference (limn)", "limn auto", "Mitsuba", "Mitsuba - reference", "Mitsuba's own FD"]
     fig, axes = plt.subplots(len(datas), len(cols), figsize=(2.1 * len(cols), 2.3 * len(datas)), squeeze=False)
     for i, (n, d) in enumerate(datas.items()):
-        ref = np.load(os.path.join(WORK, f"{n}_reference.npy")).mean(-1)
-        v = np.abs(ref).max() or 1.0
+        ref = np.load(os.path.join(WORK, f"{n}_reference.npy"))
+        v = np.abs(ref.mean(-1)).max() or 1.0
         desc = limn_desc(n)
         R = regions(n, desc, np.array(d["control_points"]))
-        for j, (title, tag) in enumerate(cols):
+        mi_g = next((g for g in ("octree", "grid", "none") if os.path.exists(os.path.join(WORK, f"{n}_{g}_mitsuba_mean.npy"))), None)
+        mi_img = np.load(os.path.join(WORK, f"{n}_{mi_g}_mitsuba_mean.npy")) if mi_g else None
+        for j, title in enumerate(cols):
             ax = axes[i][j]
             ax.set_xticks([])
             ax.set_yticks([])
-            if tag is None:
-                img = np.load(os.path.join(WORK, f"{n}_primal.npy"))[0]
-                ax.imshow(np.clip(img / max(img.max(), 1e-9), 0, 1) ** (1 / 2.2))
+            img = {"FD reference (limn)": ref, "Mitsuba": mi_img, "Mitsuba - reference": None if mi_img is None else mi_img - ref}.get(title)
+            if title == "limn auto" and os.path.exists(os.path.join(WORK, f"{n}_auto_limn_mean.npy")):
+                img = np.load(os.path.join(WORK, f"{n}_auto_limn_mean.npy"))
+            if title == "Mitsuba's own FD":
+                img = np.load(os.path.join(WORK, f"{n}_mifd.npy"))
+            if title.startswith("Mitsuba") and mi_g and title != "Mitsuba's own FD":
+                title = title.replace("Mitsuba", f"Mitsuba {mi_g}")
+            if j == 0:
+                pr = np.load(os.path.join(WORK, f"{n}_primal.npy"))[0]
+                ax.imshow(np.clip(pr / max(pr.max(), 1e-9), 0, 1) ** (1 / 2.2))
+            elif img is None:
+                ax.set_title(f"{title}\n(not run)", fontsize=6)
+                continue
             else:
-                f = os.path.join(WORK, f"{n}_{tag}.npy" if tag in ("reference", "mifd") else f"{n}_{tag}_mean.npy")
-                if not os.path.exists(f):
-                    ax.set_title(f"{title}\n(not run)", fontsize=6)
-                    continue
-                ax.imshow(np.load(f).mean(-1), cmap="RdBu_r", vmin=-v, vmax=v)
+                ax.imshow(img.mean(-1), cmap="RdBu_r", vmin=-v, vmax=v)
             ax.contour(R["joints"], levels=[0.5], colors="k", linewidths=0.4)
             ax.contour(R["ends"], levels=[0.5], colors="g", linewidths=0.4)
-            ax.set_title(title if i == 0 else "", fontsize=7)
+            ax.set_title(title, fontsize=6)
         axes[i][0].set_ylabel(n, fontsize=7)
     fig.suptitle(f"d image / d x (mean over runs at {top} spp; colour range = reference's max); black: near span joints, green: near ends",
                  fontsize=7)
