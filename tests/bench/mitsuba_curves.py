@@ -484,6 +484,8 @@ def report(out_path: str, data_dir: str, command: str):
              "Parameter: x translation of all control points (`<id>.control_points[:, 0]`; Mitsuba's "
              "`<id>.control_points` is exposed by `mi.traverse` as differentiable and discontinuous, a flat "
              "x y z r array). Radius derivatives were not measured.", "",
+             "What Mitsuba gets wrong, the crashes and what was not run: [README.md](README.md#mitsuba-3-side-by-side) "
+             "(written from these numbers).", "",
              "## Do both renderers see the same curve?", "",
              "Both read the same text file of control points (Mitsuba's format). Primal: both at 2 x 512 spp; "
              "the noise column is what two such renders differ by from noise alone. Mitsuba's FD: its own "
