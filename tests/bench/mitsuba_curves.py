@@ -22,7 +22,7 @@ budget (mean over the runs) are compared with the reference per region: pixels w
 an interior span joint is seen (directly, in the mirror, or as a shadow), pixels near the open ends,
 and the rest; and the sum of each derivative image against the reference's.
 
-Regenerate (the scenes can run side by side, `--scenes S` each; 50-60 min per scene at a load average of 25 on 2 cores):
+Regenerate (the scenes can run side by side, `--scenes S` each; 35-55 min per scene at a load average of 25-34 on 2 cores):
     nice .venv/bin/python tests/bench/mitsuba_curves.py
 """
 from __future__ import annotations
