@@ -469,8 +469,8 @@ def report(out_path: str, data_dir: str, command: str):
              "Time per scene here: " + ", ".join(f"{n} {d['seconds'] / 60:.0f} min" for n, d in datas.items() if "seconds" in d)
              + " (with the machine's load below; on an idle machine a fraction of that).", "",
              f"Mitsuba {any_d['mitsuba_version']} (`llvm_ad_rgb`, `prb_projective`, forward mode) and limn on "
-             f"{any_d['machine']}, {any_d['date']}, load average {any_d.get('load', '?')} at the start of each "
-             "scene on 2 cores shared with other engineers' builds and tests: absolute times are slower than an "
+             f"{any_d['machine']}, {any_d['date']}, load average at the start of each scene "
+             + ", ".join(f"{n} {d.get('load', '?')}" for n, d in datas.items()) + " on 2 cores shared with other engineers' builds and tests: absolute times are slower than an "
              "idle machine's; the interleaving puts both renderers under the same load. Measured as in "
              "[../projective/mitsuba.md](../projective/mitsuba.md) (tests/bench/mitsuba_compare.py, whose functions "
              "this script uses): the same budgets for both (spp for every term; Mitsuba's call spp sets sppc = sppp = "
