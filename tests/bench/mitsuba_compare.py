@@ -44,8 +44,8 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCENES = os.path.join(ROOT, "scenes", "projective")
 WORK = os.path.join(tempfile.gettempdir(), "limn_mitsuba_compare")  # reference and primal handed to the workers
-GUIDINGS = ("none", "grid", "octree")
-LIMN_LABEL = {"none": "none", "grid": "projective grid", "octree": "octree"}
+GUIDINGS = ("none", "grid", "octree", "auto")  # "auto": limn's default, no Mitsuba counterpart
+LIMN_LABEL = {"none": "none", "grid": "projective grid", "octree": "octree", "auto": "auto (default)"}
 CAP = 2.0  # an error within CAP x the reference's noise is flagged: the reference's noise is >= 1/4 of its square
 
 
@@ -85,15 +85,19 @@ def bsdf(d: dict) -> dict:
     raise ValueError(d["type"])
 
 
+def mitsuba_sensor(mi, s: dict) -> dict:
+    """limn's perspective sensor as Mitsuba's (box filter, as limn's pixels)."""
+    return {"type": "perspective", "fov": s["fov"], "to_world": transform(mi, s["to_world"]),
+            "film": {"type": "hdrfilm", "width": s["film"]["width"], "height": s["film"]["height"],
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "sampler": {"type": "independent", "sample_count": 4}}
+
+
 def mitsuba_scene(mi, desc: dict, guiding: str) -> dict:
     # sppc/sppp/sppi unset: each call's spp sets all three (Mitsuba's override_spp).
-    s = desc["sensor"]
     out = {"type": "scene",
            "integrator": {"type": "prb_projective", "max_depth": desc["integrator"]["max_depth"], "guiding": guiding},
-           "sensor": {"type": "perspective", "fov": s["fov"], "to_world": transform(mi, s["to_world"]),
-                      "film": {"type": "hdrfilm", "width": s["film"]["width"], "height": s["film"]["height"],
-                               "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-                      "sampler": {"type": "independent", "sample_count": 4}}}
+           "sensor": mitsuba_sensor(mi, desc["sensor"])}
     for key in ("plane", "emitter", "shape"):
         sh = desc[key]
         m = {"type": sh["type"], "bsdf": bsdf(sh["bsdf"])}
@@ -158,12 +162,51 @@ def limn_scene(name: str):
     return desc, scene, {param: t}
 
 
+def interleaved(out: dict, run_limn, run_mi, budgets: list[int], runs: int, tag: str) -> None:
+    """The timed calls by the project's rules: limn's warm-up once, Mitsuba's once per budget (Dr.Jit
+    compiles per call shape), then ``runs`` runs per budget with seeds 7, 107, 207 ..., the two
+    renderers back to back in alternating order. run_limn / run_mi(budget, seed) -> (seconds, error);
+    either None: the other alone. Fills out["runs"] and out["warmup"]."""
+    out.setdefault("runs", {"limn": {}, "mitsuba": {}})
+    out.setdefault("warmup", {"limn": {}, "mitsuba": {}})
+    if run_limn is not None:
+        out["warmup"]["limn"][str(budgets[0])] = run_limn(budgets[0], 999)[0]
+    for b in budgets:
+        if run_mi is not None:
+            out["warmup"]["mitsuba"][str(b)] = run_mi(b, 999)[0]  # compiles this budget's kernels
+        L, M = [], []
+        for r in range(runs):
+            seed = 7 + 100 * r
+            order = (("limn", "mitsuba") if r % 2 == 0 else ("mitsuba", "limn"))
+            for who in order:
+                if who == "limn" and run_limn is not None:
+                    L.append(run_limn(b, seed))
+                elif who == "mitsuba" and run_mi is not None:
+                    M.append(run_mi(b, seed))
+        if run_limn is not None:
+            out["runs"]["limn"][str(b)] = L
+        if run_mi is not None:
+            out["runs"]["mitsuba"][str(b)] = M
+        print(f"# {tag} {b} spp: limn {L}, mitsuba {M}", file=sys.stderr, flush=True)
+
+
+def reference_halves(scene, tangent: dict, eps: float, fd_spp: int):
+    """limn's central difference in two independent halves of fd_spp / 2 each (seeds 12345 and 777,
+    cached by limn.fd): their mean, its own relative noise RMS(a - b) / 2 / RMS(mean) (the mean of
+    two independent estimates has a quarter of the variance of their difference), and the halves."""
+    import limn
+    a, b = (limn.fd(scene, tangent, eps=eps, spp=fd_spp // 2, seed=s).astype(np.float64) for s in (12345, 777))
+    ref = 0.5 * (a + b)
+    noise = float(np.sqrt(((a - b) ** 2).mean())) / 2.0 / float(np.sqrt((ref ** 2).mean()))
+    return ref, noise, a, b
+
+
 def worker(name: str, guiding: str, budgets: list[int], runs: int, with_mitsuba: bool, primal: bool) -> int:
     """One guiding for both renderers, interleaved; prints one JSON line."""
     desc, scene, tangent = limn_scene(name)
     ref = np.load(os.path.join(WORK, f"{name}_reference.npy"))
     rms = float(np.sqrt((ref ** 2).mean()))
-    out = {"guiding": guiding, "runs": {"limn": {}, "mitsuba": {}}, "warmup": {"limn": {}, "mitsuba": {}}}
+    out = {"guiding": guiding}
     peer = MitsubaPeer(desc, guiding) if with_mitsuba else None
     if peer is not None and primal:  # the primal check once per scene
         primal_limn = np.load(os.path.join(WORK, f"{name}_primal.npy"))
@@ -183,23 +226,7 @@ def worker(name: str, guiding: str, budgets: list[int], runs: int, with_mitsuba:
         s = time.perf_counter() - t0
         return s, float(np.sqrt(((g - ref) ** 2).mean()) / rms)
 
-    out["warmup"]["limn"][str(budgets[0])] = run_limn(budgets[0], 999)[0]
-    for b in budgets:
-        if peer is not None:
-            out["warmup"]["mitsuba"][str(b)] = run_mi(b, 999)[0]  # compiles this budget's kernels
-        L, M = [], []
-        for r in range(runs):
-            seed = 7 + 100 * r
-            order = (("limn", "mitsuba") if r % 2 == 0 else ("mitsuba", "limn"))
-            for who in order:
-                if who == "limn":
-                    L.append(run_limn(b, seed))
-                elif peer is not None:
-                    M.append(run_mi(b, seed))
-        out["runs"]["limn"][str(b)] = L
-        if peer is not None:
-            out["runs"]["mitsuba"][str(b)] = M
-        print(f"# {name} {guiding} {b} spp: limn {L}, mitsuba {M}", file=sys.stderr, flush=True)
+    interleaved(out, run_limn, run_mi if peer is not None else None, budgets, runs, f"{name} {guiding}")
     print("RESULT " + json.dumps(out), flush=True)
     return 0
 
@@ -332,7 +359,7 @@ def plot(name, rows, floor, png):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6, 4.2))
-    colors = {"none": "tab:gray", "grid": "tab:blue", "octree": "tab:red"}
+    colors = {"none": "tab:gray", "grid": "tab:blue", "octree": "tab:red", "auto": "tab:green"}
     for renderer, style in (("limn", "o-"), ("mitsuba", "s--")):
         for g in GUIDINGS:
             pts = sorted((x[3], x[4], x[5], x[2]) for x in rows if x[0] == renderer and x[1] == g)
@@ -355,6 +382,43 @@ def plot(name, rows, floor, png):
     fig.tight_layout()
     fig.savefig(png, dpi=110)
     plt.close(fig)
+
+
+def scene_section(n: str, d: dict, out_dir: str, prefix: str = "mitsuba_"):
+    """One scene's equal-time summary lines and its table + plot (<out_dir>/<prefix><n>.png)."""
+    summary, body = [], []
+    floor = d["ref_noise"]
+    rows = rows_of(d)
+    body += [f"## {n}", ""]
+    if "primal_ratio" in d:
+        body += [f"Primal images at 1024 spp: Mitsuba / limn mean {d['primal_ratio']:.4f}, relative RMS "
+                 f"difference {d['primal_diff']:.4f}. Reference's own relative noise: **{floor:.4f}**.", ""]
+    else:
+        body += [f"Reference's own relative noise: **{floor:.4f}**.", ""]
+    body += [f"- {f}" for f in d.get("failures", [])] + ([""] if d.get("failures") else [])
+    body += ["| renderer | guiding | budget (spp) | median time (s) | relative RMSE (mean ± sd) | runs: time (s) / error |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        mark = " †" if r[4] < CAP * floor else ""
+        runs = ", ".join(f"{s:.2f}/{e:.3f}" for s, e in r[6])
+        g = LIMN_LABEL[r[1]] if r[0] == "limn" else r[1]
+        body.append(f"| {'limn' if r[0] == 'limn' else 'Mitsuba'} | {g} | {r[2]} | {r[3]:.3f} | "
+                    f"{r[4]:.4f} ± {r[5]:.4f}{mark} | {runs} |")
+    body.append("")
+    png = f"{prefix}{n}.png"
+    try:
+        plot(n, rows, floor, os.path.join(out_dir, png))
+        body += [f"![{n}]({png})", ""]
+    except ImportError:
+        pass
+    summary += [f"**{n}** (reference noise {floor:.4f}):", ""]
+    for label, ratios in equal_time(rows, floor):
+        summary.append(f"- {label}: {summarize(ratios)}.")
+        if label == "best of each" and ratios:
+            summary.append("  " + "; ".join(f"{t:.2g} s: {fmt_ratio(x)}{' †' if c else ''} ({LIMN_LABEL[gl]} / {gm})"
+                                             for t, x, c, gl, gm in ratios) + ".")
+    summary.append("")
+    return summary, body
 
 
 def report(out_path: str, data_dir: str, command: str):
@@ -396,40 +460,26 @@ def report(out_path: str, data_dir: str, command: str):
                "every such case here), so the true ratio is larger.", ""]
     body = []
     for n, d in datas.items():
-        floor = d["ref_noise"]
-        rows = rows_of(d)
-        body += [f"## {n}", ""]
-        if "primal_ratio" in d:
-            body += [f"Primal images at 1024 spp: Mitsuba / limn mean {d['primal_ratio']:.4f}, relative RMS "
-                     f"difference {d['primal_diff']:.4f}. Reference's own relative noise: **{floor:.4f}**.", ""]
-        else:
-            body += [f"Reference's own relative noise: **{floor:.4f}**.", ""]
-        body += [f"- {f}" for f in d.get("failures", [])] + ([""] if d.get("failures") else [])
-        body += ["| renderer | guiding | budget (spp) | median time (s) | relative RMSE (mean ± sd) | runs: time (s) / error |",
-                 "|---|---|---|---|---|---|"]
-        for r in rows:
-            mark = " †" if r[4] < CAP * floor else ""
-            runs = ", ".join(f"{s:.2f}/{e:.3f}" for s, e in r[6])
-            g = LIMN_LABEL[r[1]] if r[0] == "limn" else r[1]
-            body.append(f"| {'limn' if r[0] == 'limn' else 'Mitsuba'} | {g} | {r[2]} | {r[3]:.3f} | "
-                        f"{r[4]:.4f} ± {r[5]:.4f}{mark} | {runs} |")
-        body.append("")
-        png = f"mitsuba_{n}.png"
-        try:
-            plot(n, rows, floor, os.path.join(os.path.dirname(out_path), png))
-            body += [f"![{n}]({png})", ""]
-        except ImportError:
-            pass
-        summary += [f"**{n}** (reference noise {floor:.4f}):", ""]
-        for label, ratios in equal_time(rows, floor):
-            summary.append(f"- {label}: {summarize(ratios)}.")
-            if label == "best of each" and ratios:
-                summary.append("  " + "; ".join(f"{t:.2g} s: {fmt_ratio(x)}{' †' if c else ''} ({LIMN_LABEL[gl]} / {gm})"
-                                                 for t, x, c, gl, gm in ratios) + ".")
-        summary.append("")
+        su, bo = scene_section(n, d, os.path.dirname(out_path))
+        summary += su
+        body += bo
     with open(out_path, "w") as f:
         f.write("\n".join(lines + summary + body) + "\n")
     print("wrote", out_path)
+
+
+def run_worker(base: list[str], guiding: str, data: dict):
+    """Runs a worker process (a Dr.Jit compiler failure aborts it); on failure again with --no-mitsuba
+    (limn alone), the failure noted in data["failures"]. Its RESULT dict, or None."""
+    for cmd in (base, base + ["--no-mitsuba"]):
+        res = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True)
+        out = [l[l.index("RESULT ") + 7:] for l in res.stdout.splitlines() if "RESULT " in l]
+        if res.returncode == 0 and out:
+            return json.loads(out[-1])
+        err = [l for l in res.stdout.splitlines() if "error" in l.lower() or "failure" in l.lower()]
+        data["failures"].append(f"Mitsuba with guiding '{guiding}' failed (exit {res.returncode}): "
+                                f"{(err or ['no output'])[0].strip()[:200]}; limn alone")
+    return None
 
 
 def main() -> int:
@@ -464,10 +514,7 @@ def main() -> int:
     for name in args.scenes:
         desc, scene, tangent = limn_scene(name)
         t0 = time.perf_counter()
-        a, b = (limn.fd(scene, tangent, eps=args.eps, spp=args.fd_spp // 2, seed=s).astype(np.float64) for s in (12345, 777))
-        ref = 0.5 * (a + b)
-        rms = float(np.sqrt((ref ** 2).mean()))
-        noise = float(np.sqrt(((a - b) ** 2).mean())) / 2.0 / rms
+        ref, noise, _, _ = reference_halves(scene, tangent, args.eps, args.fd_spp)
         print(f"{name}: references in {time.perf_counter() - t0:.0f} s, reference noise {noise:.4f}", flush=True)
         np.save(os.path.join(WORK, f"{name}_reference.npy"), ref)
         np.save(os.path.join(WORK, f"{name}_primal.npy"), scene.render(spp=1024, seed=5).astype(np.float64))
@@ -479,19 +526,12 @@ def main() -> int:
             base = [sys.executable, os.path.abspath(__file__), "--worker", name, guiding, "--runs", str(args.runs),
                     "--budgets", *map(str, args.budgets)] + (["--primal"] if "primal_ratio" not in data else [])
             # Each guiding in a process of its own: a Dr.Jit compiler failure aborts it; limn alone then.
-            for cmd in (base, base + ["--no-mitsuba"]):
-                res = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True)
-                out = [l[l.index("RESULT ") + 7:] for l in res.stdout.splitlines() if "RESULT " in l]
-                if res.returncode == 0 and out:
-                    r = json.loads(out[-1])
-                    for k in ("primal_ratio", "primal_diff"):
-                        if k in r:
-                            data[k] = r[k]
-                    data["configs"][guiding] = r
-                    break
-                err = [l for l in res.stdout.splitlines() if "error" in l.lower() or "failure" in l.lower()]
-                data["failures"].append(f"Mitsuba with guiding '{guiding}' failed (exit {res.returncode}): "
-                                        f"{(err or ['no output'])[0].strip()[:200]}; limn alone")
+            r = run_worker(base, guiding, data)
+            if r is not None:
+                for k in ("primal_ratio", "primal_diff"):
+                    if k in r:
+                        data[k] = r[k]
+                data["configs"][guiding] = r
             with open(os.path.join(data_dir, name + ".json"), "w") as f:  # partial results survive an interruption
                 json.dump(data, f, indent=1)
         with open(os.path.join(data_dir, name + ".json"), "w") as f:
