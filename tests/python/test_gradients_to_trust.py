@@ -112,7 +112,10 @@ def test_small_alpha_roughness_derivative_agrees_with_fd(distribution, alpha):
     assert np.abs(z_off).max() > 10.0, z_off  # the derivative is resolved: FD alone is far from zero
 
 
-@pytest.mark.term("interior")
+# Not marked @pytest.mark.term: its expected derivative is about 0, so the term scaled by any k
+# has the same mean, and it fails at k = 0 only because the spread of an all-zero estimate is 0
+# (docs/reports/test_power_notes.md). Its power is against a bias that does not scale with the
+# term (a fraction of the score 2/alpha): asserted below to 1 % of 2/alpha.
 @pytest.mark.parametrize("distribution", ["ggx", "beckmann"])
 @pytest.mark.parametrize("alpha", [1e-3, 1e-4])
 def test_a_narrow_lobe_under_a_uniform_sky_has_no_roughness_derivative(distribution, alpha):
