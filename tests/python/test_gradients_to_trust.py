@@ -190,9 +190,14 @@ def sums(stack):
     return s.mean(), s.std(ddof=1) / np.sqrt(len(s))
 
 
-@pytest.mark.parametrize("subdivisions,light,face_normals", [(2, "sun", False), (2, "sun", True), (4, "sky", False), (4, "sky", True)],
-                         ids=["smooth-terminator", "flat-terminator", "smooth-fine-outline", "flat-fine-outline"])
-@pytest.mark.term("primary", "interior")
+# Term markers per case: scaling about the centre turns no face's normal (nor an interpolated one),
+# so the interior term's share is measurable only for the smooth mesh under the sun; in the other
+# three cases the test passed with the interior term switched off (docs/reports/test_power.md).
+@pytest.mark.parametrize("subdivisions,light,face_normals", [
+    pytest.param(2, "sun", False, marks=pytest.mark.term("primary", "interior"), id="smooth-terminator"),
+    pytest.param(2, "sun", True, marks=pytest.mark.term("primary"), id="flat-terminator"),
+    pytest.param(4, "sky", False, marks=pytest.mark.term("primary"), id="smooth-fine-outline"),
+    pytest.param(4, "sky", True, marks=pytest.mark.term("primary"), id="flat-fine-outline")])
 def test_mesh_outlines_and_terminators_agree_with_fd(subdivisions, light, face_normals):
     """Scaling an icosphere: the derivative image's sum agrees with central differences. Two
     primary-term faults made these fail (docs/derivatives.md, "Smooth shading"): smooth meshes had
