@@ -129,14 +129,18 @@ class MitsubaPeer:
         self.params.update()
         return np.array(self.mi.render(self.scene, spp=spp, seed=seed))[..., :3].astype(np.float64)
 
+    def moved(self, theta):
+        """The shape's parameter translated by theta along x."""
+        mi, dr = self.mi, self.dr
+        if self.sphere:
+            return mi.Transform4f().translate(mi.Vector3f(theta, 0.0, 0.0)) @ self.base
+        return self.base + theta * dr.tile(mi.Float([1.0, 0.0, 0.0]), dr.width(self.base) // 3)
+
     def gradient(self, spp: int, seed: int) -> np.ndarray:
         dr, mi = self.dr, self.mi
         theta = mi.Float(0.0)
         dr.enable_grad(theta)
-        if self.sphere:
-            self.params[self.key] = mi.Transform4f().translate(mi.Vector3f(theta, 0.0, 0.0)) @ self.base
-        else:
-            self.params[self.key] = self.base + theta * dr.tile(mi.Float([1.0, 0.0, 0.0]), dr.width(self.base) // 3)
+        self.params[self.key] = self.moved(theta)
         self.params.update()
         dr.forward(theta, dr.ADFlag.ClearEdges)
         image = mi.render(self.scene, self.params, spp=spp, seed=seed)

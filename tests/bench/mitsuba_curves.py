@@ -117,7 +117,7 @@ def mitsuba_dict(mi, desc: dict, guiding: str) -> dict:
     return out
 
 
-class CurvePeer:
+class CurvePeer(mc.MitsubaPeer):
     """One Mitsuba configuration: forward-mode derivative images along an x translation of all
     control points (Mitsuba's '<id>.control_points', flattened x y z r)."""
 
@@ -133,7 +133,7 @@ class CurvePeer:
         return np.array(self.base).reshape(-1, 4)
 
     def primal(self, spp: int, seed: int, theta: float = 0.0) -> np.ndarray:
-        self.params[self.key] = self.base + theta * self.dir
+        self.params[self.key] = self.moved(theta)
         self.params.update()
         img = np.array(self.mi.render(self.scene, spp=spp, seed=seed))[..., :3].astype(np.float64)
         self.params[self.key] = self.mi.Float(self.base)
@@ -149,18 +149,8 @@ class CurvePeer:
             n += s
         return acc / n
 
-    def gradient(self, spp: int, seed: int) -> np.ndarray:
-        dr, mi = self.dr, self.mi
-        theta = mi.Float(0.0)
-        dr.enable_grad(theta)
-        self.params[self.key] = self.base + theta * self.dir
-        self.params.update()
-        dr.forward(theta, dr.ADFlag.ClearEdges)
-        image = mi.render(self.scene, self.params, spp=spp, seed=seed)
-        dr.forward_to(image)
-        g = dr.grad(image)
-        dr.eval(g)
-        return np.array(g)[..., :3].astype(np.float64)
+    def moved(self, theta):
+        return self.base + theta * self.dir
 
 
 def worker(name: str, guiding: str, budgets: list[int], runs: int, with_limn: bool, with_mitsuba: bool) -> int:
