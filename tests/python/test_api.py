@@ -156,7 +156,7 @@ def test_image_round_trips(tmp_path):
 
 
 def test_tall_tiled_and_grey_images_read_whole(tmp_path):
-    # Scanline files are read 64 rows at a time (image_io.cpp): a height that is not a multiple of
+    # Scanline files are read in blocks of at least 64 rows (image_io.cpp): a height that is not a multiple of
     # the block, a tiled file and a one-channel file must come back pixel for pixel.
     import shutil
     import subprocess
