@@ -280,11 +280,12 @@ bool BoundarySegments<BSplineCurve>::sample(const Scene&, const BSplineCurve& g,
     double offset, t;
     interior_coordinate(g, f, bin, offset, span, t);
     const double u = kTwoPi * u1, phi = kTwoPi * u2;
-    const TubeLocal L = g.local(span, t, u);
+    const CurveSample cs = g.eval(span, t);
+    const TubeLocal L = tube_local(cs, g.radial(span, t, u));  // g.local(span, t, u) with cs kept for r
     const Vec3d e2 = glm::cross(L.n, L.b);
     // Density over (t, u, phi): pmf(bin) kBins / (2 pi)^2; per dA dphi divided by |M_u x M_v|.
     out.pdf = float(pdf_select * g.bins.pmf(bin) * BSplineCurve::kBins / (kTwoPi * kTwoPi * L.area_density));
-    return finish_interior(L, span, t, u, g.eval(span, t).r, std::cos(phi) * L.b + std::sin(phi) * e2, out);
+    return finish_interior(L, span, t, u, cs.r, std::cos(phi) * L.b + std::sin(phi) * e2, out);
   }
   size_t span;
   double t;

@@ -125,7 +125,7 @@ float IndirectBoundary::guide_value(const Vec3& u) const {
   splats.clear();
   vel.clear();
   uint64_t rays = 0;
-  sample_at(u, 1.0f, 1.0f, rng, in, splats, vel, rays, /*delta_terms=*/false);
+  sample_at(u, 1.0f, 1.0f, rng, in, splats, vel, rays, /*delta_terms=*/false, /*value_only=*/true);
   float v = 0.0f;
   for (const Splat& sp : splats) v += luminance(glm::abs(sp.value));
   return v;
@@ -133,6 +133,11 @@ float IndirectBoundary::guide_value(const Vec3& u) const {
 
 void IndirectBoundary::sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& in, std::vector<Splat>& splats,
                                  std::vector<Var>& velocities, uint64_t& rays, bool delta_terms) const {
+  sample_at(u, pdf_u, pdf_u0, rng, in, splats, velocities, rays, delta_terms, false);
+}
+
+void IndirectBoundary::sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& in, std::vector<Splat>& splats,
+                                 std::vector<Var>& velocities, uint64_t& rays, bool delta_terms, bool value_only) const {
   // pdf_u is the guide's density on [0,1)^3, pdf_u0 that of u.x alone (the delta-light terms use u.x only).
   // Radiance probes and importance paths need independent random numbers (E[L_d W] is wanted, not
   // a product of correlated estimates): a stream of their own for the importance paths.
@@ -140,14 +145,15 @@ void IndirectBoundary::sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32
   const Pcg32 importance_rng(seed, 0x696d706f7274616eULL);
   const Pcg32 base = rng;
   BoundaryPoint p;
-  if (m_space.sample(u, pdf_u, p)) evaluate(p, -1, base, importance_rng, in, splats, velocities, rays);
+  if (m_space.sample(u, pdf_u, p)) evaluate(p, -1, base, importance_rng, in, splats, velocities, rays, value_only);
   if (!delta_terms) return;
   for (int li : m_delta_lights)
-    if (m_space.sample_delta(u.x, pdf_u0, m_scene.emitters[li], p)) evaluate(p, li, base, importance_rng, in, splats, velocities, rays);
+    if (m_space.sample_delta(u.x, pdf_u0, m_scene.emitters[li], p))
+      evaluate(p, li, base, importance_rng, in, splats, velocities, rays, value_only);
 }
 
 void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& rng0, const Pcg32& rng_importance, PathInputs& in,
-                                std::vector<Splat>& splats, std::vector<Var>& velocities, uint64_t& rays) const {
+                                std::vector<Splat>& splats, std::vector<Var>& velocities, uint64_t& rays, bool value_only) const {
   const bool delta_light = light >= 0;
   const Vec3 &xb = p.xb, &w = p.w, &n_b = p.n_b;
   const float delta = p.delta;
@@ -267,9 +273,16 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
   // self-shadowing shapes all go through this one expression.
   const VV nb(Var(n_b.x), Var(n_b.y), Var(n_b.z));
   const Var v_b = dot(m_space.attached_point(p, in), nb);
+  // Only the value is wanted (guide_value): a moving x_b makes every velocity below non-constant
+  // (a sum with a non-constant term is never folded to a constant, core/diff/ad/ad.h), so the
+  // ray to x_c and y's attached point would change nothing. Curves, coil in the reflection scene:
+  // that ray grazes the tube and is about a third of the guide's rays (issue 36).
+  const bool values_alone = value_only && !v_b.is_constant();
   float s = 0.0f;
   Var v_c(0.0);
-  if (delta_light) {
+  if (values_alone) {
+    // s and v_c enter the velocities alone.
+  } else if (delta_light) {
     if (const auto* pl = std::get_if<PointEmitter>(&m_scene.emitters[light].model))
       s = dist_y / (dist_y + glm::length(pl->position - xb));
   } else {
@@ -283,7 +296,7 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
   }
   const Var v_ends = v_b - Var(s) * v_c;
   int vi_slide = -1, vi_attached = -1;
-  if (!m_params.moves(y.shape)) {
+  if (values_alone || !m_params.moves(y.shape)) {
     vi_slide = vi_attached = int(velocities.size());
     velocities.push_back(v_ends);
   } else {
@@ -298,7 +311,7 @@ void IndirectBoundary::evaluate(const BoundaryPoint& p, int light, const Pcg32& 
   }
   for (const Connection& c : conns) {
     int vi = c.depth == 1 ? vi_slide : vi_attached;
-    if (c.stack >= 0 && m_params.moves(y.shape)) {
+    if (c.stack >= 0 && m_params.moves(y.shape) && !values_alone) {
       // y seen through a stack slides along the stack's last segment (static interfaces).
       const Vec3& d = stack_dirs[size_t(c.stack)];
       const VV y_att = attached_position(DiffContext{m_scene, m_params, in}, SurfacePoint::of(y));

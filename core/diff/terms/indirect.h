@@ -56,9 +56,13 @@ class IndirectBoundary {
 
  private:
   // Evaluates one boundary point (light = -1: any light, else that delta light alone); appends
-  // splats with values already divided by the point's pdf.
+  // splats with values already divided by the point's pdf. value_only (guide_value): the splats'
+  // values are exact but their velocities only say whether they are constant, which skips the
+  // background point's ray and the observer's attached point whenever the boundary point moves.
   void evaluate(const BoundaryPoint& p, int light, const Pcg32& rng_probes, const Pcg32& rng_importance, PathInputs& in,
-                std::vector<Splat>& splats, std::vector<ad::Var>& velocities, uint64_t& rays) const;
+                std::vector<Splat>& splats, std::vector<ad::Var>& velocities, uint64_t& rays, bool value_only = false) const;
+  void sample_at(const Vec3& u, float pdf_u, float pdf_u0, Pcg32& rng, PathInputs& inputs, std::vector<Splat>& splats,
+                 std::vector<ad::Var>& velocities, uint64_t& rays, bool delta_terms, bool value_only) const;
 
   const Scene& m_scene;
   const DiffParams& m_params;
