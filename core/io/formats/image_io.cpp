@@ -156,9 +156,11 @@ std::string check_exr_header(const std::string& path, uint64_t file_size) {
         if (size - k < 4 || u32(value + k) > size - k - 4) return "the OpenEXR string list '" + printable(name, 40) + "' overruns its size";
         k += 4 + u32(value + k);
       }
-    // OpenEXR allocates an ID manifest's data as its size less the uncompressed-size field (4 bytes
-    // in OpenEXR 3.1, 8 in later versions): a smaller size would wrap around.
-    if (type == "idmanifest" && size < 8) return "the OpenEXR ID manifest '" + printable(name, 40) + "' is shorter than 8 bytes";
+    // ID manifests (Cryptomatte) are refused: Debian's OpenEXR 3.1 reads an 8-byte size field and
+    // then size - 4 bytes, 4 more than the attribute holds, which shifts every attribute after it
+    // (a shifted size field then sized a 1.4 GB allocation; found by fuzz_image). limn reads no IDs.
+    if (type == "idmanifest")
+      return "the OpenEXR attribute '" + printable(name, 40) + "' is an ID manifest (Cryptomatte), which limn does not read; save the image without it";
     if (type == "chlist") {
       // OpenEXR reads any channel list up to its empty name, whatever size the file states, and a
       // channel name up to 255 characters: either mismatch would shift the attributes after it.
