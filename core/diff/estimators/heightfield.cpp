@@ -422,13 +422,12 @@ struct HeightfieldPath {
     return R.bsdf_eval(bsdf, x, wi, w) * R.emitter_value(et.emitter, rad) * (sin(theta) * w_phi * w_theta * Var(double(K)));
   }
 
-  // Whether a shadow ray is blocked. The first blocker of a blocked ray is looked up (one more
-  // ray) and noted when it is no heightfield: its shadow edges get no term (the summary names it).
+  // Whether a shadow ray is blocked. Its first blocker comes with the same ray and is noted when it
+  // is no heightfield: its shadow edges get no term (the summary names it).
   bool shadowed(const Ray& r) {
-    if (!scene.occluded(r)) return false;
     SurfaceInteraction b;
-    ++cnt.rays;
-    if (scene.intersect(r, b) && !std::holds_alternative<Heightfield>(scene.shapes[b.shape].geometry)) {
+    if (!scene.intersect(r, b)) return false;
+    if (!std::holds_alternative<Heightfield>(scene.shapes[b.shape].geometry)) {
       ++cnt.other_shadow_blocks;
       if (cnt.shadow_blockers.size() <= size_t(b.shape)) cnt.shadow_blockers.resize(scene.shapes.size(), 0);
       cnt.shadow_blockers[b.shape] = 1;
